@@ -1,0 +1,228 @@
+"""Detections -> topology (paper §II) -> lane course (paper §III): one pipeline for all.
+
+:func:`estimate` is the one-shot call the benchmark uses; :class:`OnlineEstimator` is the
+anytime pipeline the node and the replay drive tick by tick: observations arrive at any
+time, each tick spends a budget (samples or wall time) and the current best estimate can
+be read at any time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+import time
+
+import numpy as np
+
+from .lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
+from .model import Intersection, Lanelet
+from .observations import Detections
+from .topology import TopologyConfig, TopologyEstimator
+
+__all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'mode_of']
+
+
+@dataclass
+class EstimateResult:
+    """A snapshot of the estimate: topology, lanelets and what it cost."""
+
+    intersection: Intersection | None
+    lanelets: list[Lanelet]
+    timing_ms: dict = field(default_factory=dict)
+    topology_samples: int = 0
+    lane_samples: int = 0
+    log_posterior: float = float('-inf')
+    state: str = 'NO_DATA'
+    observations: int = 0
+
+    def stats(self) -> dict:
+        return {'topology_samples': int(self.topology_samples), 'lane_samples': int(self.lane_samples),
+                'elapsed_s': round(sum(self.timing_ms.get(k, 0.0) for k in ('topology', 'lanes')) / 1e3, 6),
+                'state': self.state, 'observations': int(self.observations)}
+
+
+def mode_of(dets: Detections) -> str:
+    """'tracked' when trajectories are present, else 'raw' (lane course needs tracks, §III)."""
+    return 'tracked' if dets.has_tracks else 'raw'
+
+
+def _seeds(seed) -> tuple[np.random.Generator, np.random.Generator]:
+    ss = np.random.SeedSequence(seed if isinstance(seed, (int, np.integer)) else
+                                np.random.default_rng(seed).integers(2**63))
+    a, b = ss.spawn(2)
+    return np.random.default_rng(a), np.random.default_rng(b)
+
+
+def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int = 5000,
+             lane_samples: int = 20000, seed: int = 0,
+             topology_config: TopologyConfig | None = None,
+             lane_config: LaneConfig | None = None) -> EstimateResult:
+    """Estimate topology and lane course from one batch of detections (bench entry point).
+
+    ``mode`` 'raw' ignores track ids (paper §II raw-detection experiment); lane course
+    needs trajectories and is skipped (straight lanelets from the topology instead).
+    """
+    mode = mode or mode_of(dets)
+    if mode not in ('tracked', 'raw', 'heading'):
+        raise ValueError(f"mode must be 'tracked', 'raw' or 'heading', got {mode!r}")
+    if mode != 'tracked':
+        dets = replace(dets, track_id=np.full(len(dets), -1, np.int64))
+    rng_topo, rng_lanes = _seeds(seed)
+    topo = TopologyEstimator(topology_config or TopologyConfig(), rng_topo)
+    t0 = time.perf_counter()
+    topo.set_observations(dets)
+    topo.run(n_samples=topology_samples)
+    t1 = time.perf_counter()
+    best = topo.best
+    lanelets, n_lane = _lanes(best, dets, mode, lane_samples, lane_config, rng_lanes)
+    t2 = time.perf_counter()
+    timing = {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3}
+    return EstimateResult(best, lanelets, timing, topo.samples_drawn, n_lane,
+                          topo.best_log_posterior, topo.state, len(dets))
+
+
+def _lanes(best, dets, mode, lane_samples, lane_config, rng):
+    if best is None:
+        return [], 0
+    if mode != 'tracked' or lane_samples <= 0:
+        return lanelets_from_topology(best), 0
+    lanes = LaneCourseEstimator(lane_config or LaneConfig(), rng)
+    lanes.initialise(best, dets)
+    lanes.run(n_samples=lane_samples)
+    return lanes.lanelets, lanes.samples_drawn
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Settings of the anytime pipeline (node parameters map 1:1 onto these)."""
+
+    window_s: float = 120.0           # observations older than this are dropped [s]
+    max_observations: int = 200_000   # hard cap of the window (oldest dropped first)
+    topology_samples: int = 5000      # per tick, in sample budget mode
+    lane_samples: int = 20000         # per tick, in sample budget mode
+    budget_s: float = 0.150           # per tick, in wall budget mode [s]
+    lane_share: float = 0.6           # share of the wall budget given to the lane course
+    lanes_enabled: bool = True
+    reset_distance: float = 25.0      # ego past the center by this much -> next intersection [m]
+    topology: TopologyConfig = field(default_factory=TopologyConfig)
+    lanes: LaneConfig = field(default_factory=LaneConfig)
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first parameter outside its allowed range."""
+        checks = [('window_s', self.window_s > 0, '> 0'),
+                  ('max_observations', self.max_observations >= 100, '>= 100'),
+                  ('topology_samples', self.topology_samples >= 1, '>= 1'),
+                  ('lane_samples', self.lane_samples >= 0, '>= 0'),
+                  ('budget_s', 0.001 <= self.budget_s <= 10.0, 'in [0.001, 10] s'),
+                  ('lane_share', 0.0 <= self.lane_share < 1.0, 'in [0, 1)'),
+                  ('reset_distance', self.reset_distance > 0, '> 0')]
+        for name, ok, allowed in checks:
+            if not ok:
+                raise ValueError(f'{name}={getattr(self, name)!r} out of range: must be {allowed}')
+        self.topology.validate()
+        self.lanes.validate()
+
+
+class OnlineEstimator:
+    """Anytime pipeline: ``add`` observations whenever they come, ``tick`` to estimate.
+
+    Deterministic for a given seed and sequence of calls when ticks use a sample budget.
+    """
+
+    def __init__(self, config: PipelineConfig | None = None, seed: int = 0):
+        self.config = config or PipelineConfig()
+        self.config.validate()
+        self._seed = seed
+        self._resets = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget observations and chains (e.g. when the ego has left the intersection)."""
+        rng_topo, rng_lanes = _seeds(self._seed + 7919 * self._resets)
+        self._resets += 1
+        self._parts: list[Detections] = []
+        self._n = 0
+        self._topo = TopologyEstimator(self.config.topology, rng_topo)
+        self._lanes = LaneCourseEstimator(self.config.lanes, rng_lanes)
+        self._lane_key = None
+        self._dirty = False
+        self.result = EstimateResult(None, [])
+
+    @property
+    def n_observations(self) -> int:
+        return self._n
+
+    def add(self, dets: Detections) -> int:
+        """Append finite detections to the window; returns how many were kept."""
+        dets = dets.finite()
+        if len(dets):
+            self._parts.append(dets)
+            self._n += len(dets)
+            self._dirty = True
+        return len(dets)
+
+    def _window(self, now: float) -> Detections:
+        cfg = self.config
+        dets = Detections.concat(self._parts)
+        keep = dets.t >= now - cfg.window_s
+        if keep.sum() > cfg.max_observations:
+            keep &= dets.t >= np.sort(dets.t[keep])[-cfg.max_observations]
+        if not keep.all():
+            dets = dets.subset(keep)
+        self._parts = [dets]
+        self._n = len(dets)
+        return dets
+
+    def passed(self, ego_xy, ego_yaw: float) -> bool:
+        """True when the ego is ``reset_distance`` past the estimated center."""
+        best = self.result.intersection
+        if best is None:
+            return False
+        d = np.asarray(ego_xy, float) - best.center
+        return float(d @ np.array([np.cos(ego_yaw), np.sin(ego_yaw)])) > self.config.reset_distance
+
+    def tick(self, now: float, *, wall_budget: bool = False) -> EstimateResult:
+        """Spend one tick's budget on the current window and return the best estimate."""
+        cfg = self.config
+        t0 = time.perf_counter()
+        if self._dirty:
+            dets = self._window(now)
+            self._topo.set_observations(dets)
+            self._dirty = False
+            self._lane_key = None if self._lane_key is None else ('stale',) + self._lane_key[1:]
+        dets = Detections.concat(self._parts)
+        if wall_budget:
+            self._topo.run(time_budget_s=cfg.budget_s * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0))
+        else:
+            self._topo.run(n_samples=cfg.topology_samples)
+        t1 = time.perf_counter()
+        best = self._topo.best
+        lanelets = self._tick_lanes(best, dets, wall_budget, cfg.budget_s - (t1 - t0))
+        t2 = time.perf_counter()
+        self.result = EstimateResult(
+            best, lanelets, {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3},
+            self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_key else 0,
+            self._topo.best_log_posterior, self._topo.state, len(dets))
+        return self.result
+
+    def _tick_lanes(self, best, dets, wall_budget, remaining_s) -> list[Lanelet]:
+        cfg = self.config
+        if best is None:
+            return []
+        if not cfg.lanes_enabled or not dets.has_tracks:
+            return lanelets_from_topology(best)
+        key = _topology_key(best)
+        if self._lane_key != key:
+            self._lanes.initialise(best, dets)
+            self._lane_key = key
+        if wall_budget:
+            if remaining_s > 0:
+                self._lanes.run(time_budget_s=remaining_s)
+        else:
+            self._lanes.run(n_samples=cfg.lane_samples)
+        return self._lanes.lanelets
+
+
+def _topology_key(best: Intersection) -> tuple:
+    """What the lane course depends on: re-initialise lanes when it changes (§III)."""
+    return ('ok', round(float(best.center[0]), 0), round(float(best.center[1]), 0),
+            tuple((round(float(np.degrees(a.angle)) / 3), a.lanes_in, a.lanes_out) for a in best.arms))
