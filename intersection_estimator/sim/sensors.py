@@ -1,0 +1,148 @@
+"""Simulated perception output in the fixed frame (paper §II-A inputs, §IV noise model).
+
+Every sensor runs at ``rate_hz`` on the ego vehicle and sees vehicles within
+``sensor_range`` of the sensor (360 deg, no occlusion). Modes:
+
+* ``'tracked'`` -- one row per vehicle and cycle: position + N(0, position_noise),
+  heading, speed, persistent ``track_id`` (= the vehicle's index), label CAR. False
+  detections are short-lived false *tracks*: static points uniform within
+  ``clutter_radius`` of the center, random heading, lifetime ``false_track_cycles``
+  cycles, ids from :data:`FALSE_TRACK_ID0` up (a tracker confirms clutter, too).
+* ``'raw'`` -- radar: ``1 + Poisson(radar_points_per_vehicle)`` points spread over the
+  vehicle body, position + N(0, position_noise), ``doppler`` = ego-motion-compensated
+  radial velocity (positive = moving away from the sensor), ``rcs``, ``sensor_xy`` =
+  radar position (ahead of the moving / stopping ego); clutter uniform within
+  ``clutter_radius`` of the center with doppler ~ N(0, doppler_noise) and low rcs.
+  No track id, no heading.
+* ``'heading'`` -- lidar / camera objects: one row per vehicle and cycle with a noisy
+  heading, no identity; false detections with a random heading.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..observations import Detections
+from .config import MODES, SimConfig
+
+__all__ = ['FALSE_TRACK_ID0', 'CAR', 'sensor_rng', 'simulate_detections']
+
+FALSE_TRACK_ID0 = 1_000_000
+CAR = 1  # Autoware label id
+
+
+def sensor_rng(seed: int, mode: str, offset: int = 0) -> np.random.Generator:
+    """Independent generator per (scenario seed, mode, offset)."""
+    ss = np.random.SeedSequence(seed, spawn_key=(1 + MODES.index(mode), int(offset)))
+    return np.random.default_rng(ss)
+
+
+def _truth(tracks, rate):
+    """All vehicle states on the cycle grid: cycle, id, xy, yaw, speed."""
+    if not tracks:
+        z = np.zeros(0)
+        return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 2)), z, z
+    cyc = np.concatenate([np.rint(tr.t * rate).astype(int) for tr in tracks])
+    vid = np.concatenate([np.full(len(tr.t), tr.id) for tr in tracks])
+    xy = np.concatenate([tr.xy for tr in tracks])
+    yaw = np.concatenate([tr.yaw for tr in tracks])
+    sp = np.concatenate([tr.speed for tr in tracks])
+    return cyc, vid, xy, yaw, sp
+
+
+def _disk(rng, n, center, radius):
+    r = radius * np.sqrt(rng.uniform(size=n))
+    phi = rng.uniform(0.0, 2 * math.pi, size=n)
+    return center + np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
+
+
+def _visible(xy, cyc, sensor_xy, rng_m):
+    return np.linalg.norm(xy - sensor_xy[cyc], axis=1) <= rng_m
+
+
+def _tracked(rng, truth, sens, center, cfg, n_cyc):
+    cyc, vid, xy, yaw, sp = truth
+    hn = math.radians(cfg.heading_noise_deg)
+    n = len(cyc)
+    det = dict(cyc=cyc, xy=xy + rng.normal(0, cfg.position_noise, (n, 2)),
+               heading=yaw + rng.normal(0, hn, n),
+               speed=np.maximum(sp + rng.normal(0, cfg.speed_noise, n), 0.0),
+               track_id=vid, label=np.full(n, CAR))
+    n_false = int(rng.poisson(cfg.false_tracks_per_s * n_cyc / cfg.rate_hz))
+    life = rng.integers(cfg.false_track_cycles[0], cfg.false_track_cycles[1] + 1, n_false)
+    start = rng.integers(0, n_cyc, n_false)
+    pos = _disk(rng, n_false, center, cfg.clutter_radius)
+    hdg = rng.uniform(-math.pi, math.pi, n_false)
+    fsp = rng.uniform(0.0, 2.0, n_false)
+    j = np.repeat(np.arange(n_false), life)
+    fc = start[j] + (np.arange(len(j)) - np.repeat(np.cumsum(life) - life, life))
+    m = len(j)
+    false = dict(cyc=fc, xy=pos[j] + rng.normal(0, cfg.position_noise, (m, 2)),
+                 heading=hdg[j] + rng.normal(0, hn, m), speed=fsp[j],
+                 track_id=FALSE_TRACK_ID0 + j, label=np.zeros(m, int))
+    return [det, false]
+
+
+def _raw(rng, truth, sens, center, cfg, n_cyc):
+    cyc, vid, xy, yaw, sp = truth
+    k = 1 + rng.poisson(cfg.radar_points_per_vehicle, len(cyc))
+    i = np.repeat(np.arange(len(cyc)), k)
+    m = len(i)
+    c, s = np.cos(yaw[i]), np.sin(yaw[i])
+    lo = rng.uniform(-0.5, 0.5, (m, 2)) * np.asarray(cfg.vehicle_size)
+    body = xy[i] + np.stack([c * lo[:, 0] - s * lo[:, 1], s * lo[:, 0] + c * lo[:, 1]], axis=1)
+    los = body - sens[cyc[i]]
+    los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
+    dop = sp[i] * (c * los[:, 0] + s * los[:, 1]) + rng.normal(0, cfg.doppler_noise, m)
+    det = dict(cyc=cyc[i], xy=body + rng.normal(0, cfg.position_noise, (m, 2)), doppler=dop,
+               rcs=rng.normal(*cfg.rcs_vehicle, m), label=np.full(m, CAR))
+    n_cl = int(rng.poisson(cfg.radar_clutter_per_cycle * n_cyc))
+    clutter = dict(cyc=rng.integers(0, n_cyc, n_cl),
+                   xy=_disk(rng, n_cl, center, cfg.clutter_radius),
+                   doppler=rng.normal(0, cfg.doppler_noise, n_cl),
+                   rcs=rng.normal(*cfg.rcs_clutter, n_cl), label=np.zeros(n_cl, int))
+    return [det, clutter]
+
+
+def _heading(rng, truth, sens, center, cfg, n_cyc):
+    cyc, vid, xy, yaw, sp = truth
+    n = len(cyc)
+    hn = math.radians(cfg.heading_noise_deg)
+    det = dict(cyc=cyc, xy=xy + rng.normal(0, cfg.position_noise, (n, 2)),
+               heading=yaw + rng.normal(0, hn, n), label=np.full(n, CAR))
+    n_f = int(rng.poisson(cfg.false_heading_per_cycle * n_cyc))
+    false = dict(cyc=rng.integers(0, n_cyc, n_f), xy=_disk(rng, n_f, center, cfg.clutter_radius),
+                 heading=rng.uniform(-math.pi, math.pi, n_f), label=np.zeros(n_f, int))
+    return [det, false]
+
+
+_MAKERS = {'tracked': _tracked, 'raw': _raw, 'heading': _heading}
+
+
+def simulate_detections(rng: np.random.Generator, mode: str, tracks, ego, center,
+                        cfg: SimConfig) -> tuple[Detections, np.ndarray]:
+    """All detections of ``mode`` over the scenario, sorted by stamp; also their cycle index.
+
+    Rows outside the sensor range (from the sensor on the ego at that cycle) are dropped.
+    """
+    if mode not in _MAKERS:
+        raise ValueError(f'unknown mode {mode!r}, expected one of {MODES}')
+    n_cyc = len(ego.t)
+    sens = ego.sensor_xy(cfg.sensor_mount)
+    parts = _MAKERS[mode](rng, _truth(tracks, cfg.rate_hz), sens, np.asarray(center), cfg, n_cyc)
+    out, cycles = [], []
+    for p in parts:
+        cyc = np.asarray(p.pop('cyc'), int)
+        ok = (cyc >= 0) & (cyc < n_cyc)
+        ok[ok] = _visible(p['xy'][ok], cyc[ok], sens, cfg.sensor_range)
+        cols = {k: np.asarray(v)[ok] for k, v in p.items()}
+        out.append(Detections.make(cols.pop('xy'), ego.t[cyc[ok]], sensor_xy=sens[cyc[ok]], **cols))
+        cycles.append(cyc[ok])
+    dets = Detections.concat(out)
+    cyc = np.concatenate(cycles) if cycles else np.zeros(0, int)
+    if len(dets) == 0:
+        return dets, np.zeros(0, int)
+    order = np.argsort(cyc, kind='stable')
+    return dets.subset(order), cyc[order]
