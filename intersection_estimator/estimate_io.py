@@ -1,0 +1,114 @@
+"""``estimate.json`` / ``gt.json`` read and write (DESIGN.md §4).
+
+``estimate.json``: ``{"center", "arms", "lanes", "stats", "traffic_side"}`` with
+``Intersection.to_json`` / ``Lanelet.to_json`` entries. ``gt.json`` is the same schema
+plus ``traffic`` per lane (trajectories using it), ``seed``, ``sim_config`` and a few
+scenario facts (``stop_m`` per arm, ``duration_s``, ``ego``). Output is deterministic:
+floats rounded to :data:`DIGITS` decimals, keys sorted, non-finite numbers written as
+``null``, so two identical estimates give byte-identical files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .model import Intersection, Lanelet
+
+__all__ = ['DIGITS', 'estimate_to_dict', 'dumps', 'write_estimate', 'read_estimate',
+           'parse_estimate', 'gt_to_dict', 'write_gt', 'read_gt', 'GroundTruth']
+
+DIGITS = 4
+
+
+def _clean(x):
+    """JSON-safe copy: numpy -> python, floats rounded, non-finite -> None."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        x = float(x)
+        return round(x, DIGITS) + 0.0 if math.isfinite(x) else None
+    return x
+
+
+def dumps(obj) -> str:
+    """Deterministic JSON text (sorted keys, rounded floats, trailing newline)."""
+    return json.dumps(_clean(obj), sort_keys=True, indent=1, allow_nan=False) + '\n'
+
+
+def estimate_to_dict(intersection: Intersection, lanelets, stats: dict | None = None) -> dict:
+    """The estimate.json document as a dict (not yet rounded)."""
+    d = intersection.to_json()
+    d['traffic_side'] = int(intersection.traffic_side)
+    d['lanes'] = [ll.to_json() for ll in sorted(lanelets or [], key=lambda ll: ll.id)]
+    d['stats'] = dict(stats or {})
+    return d
+
+
+def write_estimate(path, intersection: Intersection, lanelets, stats: dict | None = None) -> Path:
+    path = Path(path)
+    path.write_text(dumps(estimate_to_dict(intersection, lanelets, stats)))
+    return path
+
+
+def parse_estimate(d: dict) -> tuple[Intersection, list[Lanelet], dict]:
+    """estimate.json dict -> ``(Intersection, lanelets, stats)``; raises on malformed input."""
+    inter = Intersection.from_json(d)
+    lanes = [Lanelet.from_json(x) for x in d.get('lanes', [])]
+    return inter, lanes, dict(d.get('stats', {}))
+
+
+def read_estimate(path) -> tuple[Intersection, list[Lanelet], dict]:
+    return parse_estimate(json.loads(Path(path).read_text()))
+
+
+@dataclass
+class GroundTruth:
+    """Contents of a gt.json."""
+
+    intersection: Intersection
+    lanelets: list[Lanelet]
+    traffic: dict[str, int]
+    seed: int | None
+    sim_config: dict
+    raw: dict
+
+
+def gt_to_dict(scenario) -> dict:
+    """gt.json of a :class:`intersection_estimator.sim.Scenario`."""
+    d = estimate_to_dict(scenario.gt, scenario.gt_lanelets,
+                         {'tracks': len(scenario.tracks), 'duration_s': scenario.duration})
+    for lane in d['lanes']:
+        lane['traffic'] = int(scenario.traffic.get(lane['id'], 0))
+    for arm, stop in zip(d['arms'], scenario.stop):
+        arm['stop_m'] = float(stop)
+    ego = scenario.ego
+    d.update(seed=int(scenario.seed), sim_config=scenario.config.to_dict(),
+             duration_s=float(scenario.duration),
+             ego={'arm': int(ego.arm), 'lane_index': int(ego.lane_index),
+                  'start_xy': ego.xy[0].tolist(), 'stop_xy': ego.xy[-1].tolist()})
+    return d
+
+
+def write_gt(path, scenario) -> Path:
+    path = Path(path)
+    path.write_text(dumps(gt_to_dict(scenario)))
+    return path
+
+
+def read_gt(path) -> GroundTruth:
+    d = json.loads(Path(path).read_text())
+    inter, lanes, _ = parse_estimate(d)
+    traffic = {str(x['id']): int(x.get('traffic', 0)) for x in d.get('lanes', [])}
+    return GroundTruth(intersection=inter, lanelets=lanes, traffic=traffic,
+                       seed=d.get('seed'), sim_config=d.get('sim_config', {}), raw=d)

@@ -1,0 +1,417 @@
+"""Score an estimate against ground truth (DESIGN.md §5, paper §IV).
+
+Per case (:func:`evaluate`):
+
+* ``arm_correct`` -- same number of arms;
+* ``topology_correct`` -- arm count right AND, after matching arms one-to-one by angular
+  distance (Hungarian, ``linear_sum_assignment``), every matched arm's
+  ``(lanes_in, lanes_out)`` right;
+* ``center_error_m``; ``angle_error_deg`` -- mean |angle difference| of matched arms;
+* lane course: estimated lanes are matched to true lanes of the same kind and matched
+  arm (connectors: same (from, to) arm pair through the arm matching) by Hungarian
+  assignment on the mean orthogonal distance of the estimated center line (resampled
+  every :data:`RESAMPLE_M`) to the true center line; pairs above :data:`GATE_M` stay
+  unmatched. Points beyond the ends of the true center line are left out (no
+  orthogonal foot point). ``lane_error_cm`` = mean over matched lanes; recall over true
+  lanes carrying traffic, precision over estimated lanes;
+* ``connectivity_recall`` -- share of matched true connectors whose estimated
+  counterpart follows the estimate matched to the true entering lane and is followed by
+  the estimate matched to the true leaving lane.
+
+A malformed estimate (missing keys, NaN, wrong types, dangling arm indices) gives a
+failed case (``ok`` False, ``reason``), never an exception. :func:`aggregate` pools the
+cases into the summary of issue 4 (accuracies as fractions in [0, 1]).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+__all__ = ['evaluate', 'aggregate', 'SUMMARY_KEYS', 'GATE_M', 'RESAMPLE_M', 'register',
+           'format_metrics']
+
+GATE_M = 1.5
+RESAMPLE_M = 0.5
+KINDS = ('entering', 'leaving', 'connector')
+SUMMARY_KEYS = ('n', 'arm_accuracy', 'topology_accuracy', 'center_error_m_mean',
+                'center_error_m_median', 'angle_error_deg_mean', 'lane_error_cm_mean',
+                'lane_recall', 'lane_precision', 'connectivity_recall', 'topology_ms_median',
+                'topology_ms_p95', 'lanes_ms_median', 'lanes_ms_p95')
+
+
+class Malformed(ValueError):
+    """The document does not follow the estimate.json schema."""
+
+
+# ---------------------------------------------------------------- parsing / validation
+def _num(x, what) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise Malformed(f'{what}: expected a number, got {type(x).__name__}')
+    if not math.isfinite(float(x)):
+        raise Malformed(f'{what}: not finite')
+    return float(x)
+
+
+def _int(x, what) -> int:
+    v = _num(x, what)
+    if v != int(v):
+        raise Malformed(f'{what}: expected an integer, got {v}')
+    return int(v)
+
+
+def _points(x, what, min_len=1) -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise Malformed(f'{what}: not a list of [x, y] ({e})') from None
+    if a.ndim != 2 or a.shape[1] != 2 or len(a) < min_len:
+        raise Malformed(f'{what}: expected >= {min_len} points [x, y], got shape {a.shape}')
+    if not np.isfinite(a).all():
+        raise Malformed(f'{what}: not finite')
+    return a
+
+
+def _get(d, key, what):
+    if not isinstance(d, dict):
+        raise Malformed(f'{what}: expected an object, got {type(d).__name__}')
+    if key not in d:
+        raise Malformed(f'{what}: missing key {key!r}')
+    return d[key]
+
+
+def _as_dict(x) -> dict:
+    """Accept an estimate.json dict, an ``(Intersection, lanelets[, stats])`` tuple or a
+    simulator ``Scenario`` (its gt.json)."""
+    if isinstance(x, dict):
+        return x
+    if hasattr(x, 'gt_lanelets'):
+        from .estimate_io import gt_to_dict
+        return gt_to_dict(x)
+    if isinstance(x, (tuple, list)) and len(x) in (2, 3):
+        from .estimate_io import estimate_to_dict
+        return estimate_to_dict(*x)
+    raise Malformed(f'expected an estimate.json object, got {type(x).__name__}')
+
+
+def _parse(d, name):
+    """-> center (2,), arms (n, 3) [angle rad, lanes_in, lanes_out], lanes list of dicts."""
+    d = _as_dict(d)
+    center = _points([_get(d, 'center', name)], f'{name}.center')[0]
+    arms_in = _get(d, 'arms', name)
+    if not isinstance(arms_in, list):
+        raise Malformed(f'{name}.arms: expected a list')
+    arms = np.array([[math.radians(_num(_get(a, 'angle_deg', f'{name}.arms[{i}]'),
+                                       f'{name}.arms[{i}].angle_deg')),
+                      _int(_get(a, 'lanes_in', f'{name}.arms[{i}]'), f'{name}.arms[{i}].lanes_in'),
+                      _int(_get(a, 'lanes_out', f'{name}.arms[{i}]'), f'{name}.arms[{i}].lanes_out')]
+                     for i, a in enumerate(arms_in)], dtype=float).reshape(-1, 3)
+    lanes_in = _get(d, 'lanes', name)
+    if not isinstance(lanes_in, list):
+        raise Malformed(f'{name}.lanes: expected a list')
+    lanes, ids = [], set()
+    for i, x in enumerate(lanes_in):
+        what = f'{name}.lanes[{i}]'
+        lid, kind = str(_get(x, 'id', what)), _get(x, 'kind', what)
+        if kind not in KINDS:
+            raise Malformed(f'{what}.kind: {kind!r} not in {KINDS}')
+        if lid in ids:
+            raise Malformed(f'{what}.id: duplicate {lid!r}')
+        ids.add(lid)
+        arm = _int(_get(x, 'arm', what), f'{what}.arm')
+        arm_to = _int(x.get('arm_to', -1), f'{what}.arm_to')
+        for a, key in ((arm, 'arm'), (arm_to, 'arm_to')):
+            if not (-1 <= a < len(arms)):
+                raise Malformed(f'{what}.{key}: {a} does not index the {len(arms)} arms')
+        succ = x.get('successors', [])
+        if not isinstance(succ, list):
+            raise Malformed(f'{what}.successors: expected a list')
+        line = _points(_get(x, 'center_line', what), f'{what}.center_line', 2)
+        lanes.append({'id': lid, 'kind': kind, 'arm': arm, 'arm_to': arm_to,
+                      'center': line, 'pts': resample(line),
+                      'successors': [str(s) for s in succ],
+                      'traffic': int(x.get('traffic', 1))})
+    return center, arms, lanes
+
+
+# ---------------------------------------------------------------- geometry
+def resample(polyline: np.ndarray, step: float = RESAMPLE_M) -> np.ndarray:
+    """Points every ``step`` metres along a polyline (ends included)."""
+    seg = np.linalg.norm(np.diff(polyline, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return polyline[:1]
+    q = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / step)) + 1))
+    return np.stack([np.interp(q, s, polyline[:, 0]), np.interp(q, s, polyline[:, 1])], axis=1)
+
+
+def simplify(polyline: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+    """A polyline whose vertices all lie within ``tol`` of its chord -> its two ends
+    (straight lanes become one segment; keeps the distance computation cheap)."""
+    if len(polyline) <= 2:
+        return polyline
+    a, b = polyline[0], polyline[-1]
+    ab = b - a
+    n = np.linalg.norm(ab)
+    if n < 1e-9:
+        return polyline
+    off = np.abs((polyline[:, 0] - a[0]) * ab[1] - (polyline[:, 1] - a[1]) * ab[0]) / n
+    along = (polyline - a) @ ab / n
+    straight = off.max() <= tol and np.all(np.diff(along) > 0)
+    return np.stack([a, b]) if straight else polyline
+
+
+def orthogonal_distances(points: np.ndarray, polyline: np.ndarray, eps: float = 1e-6):
+    """Distance of each point to the polyline; NaN where the nearest foot point lies
+    beyond the first or last vertex (no orthogonal projection)."""
+    ax, ay = polyline[:-1, 0], polyline[:-1, 1]
+    bx, by = np.diff(polyline[:, 0]), np.diff(polyline[:, 1])
+    ll = np.maximum(bx * bx + by * by, 1e-12)
+    px = points[:, :1] - ax[None]
+    py = points[:, 1:] - ay[None]
+    t_raw = (px * bx + py * by) / ll
+    t = np.clip(t_raw, 0.0, 1.0)
+    d2 = (px - t * bx) ** 2 + (py - t * by) ** 2
+    j = d2.argmin(axis=1)
+    rows = np.arange(len(points))
+    out = np.sqrt(d2[rows, j])
+    tr = t_raw[rows, j]
+    beyond = ((j == 0) & (tr < -eps)) | ((j == len(ax) - 1) & (tr > 1 + eps))
+    out[beyond] = np.nan
+    return out
+
+
+def lane_distance(est_center: np.ndarray, gt_center: np.ndarray) -> float:
+    """Mean orthogonal distance of the resampled estimated center line to the true one
+    (inf with fewer than two points that have an orthogonal foot point)."""
+    return float(_cost_matrix([resample(est_center)], [gt_center])[0, 0])
+
+
+def _cost_matrix(est_pts: list, gt_centers: list) -> np.ndarray:
+    """``lane_distance`` for all pairs: (len(gt_centers), len(est_pts)), one pass per true lane."""
+    pts = np.concatenate(est_pts)
+    starts = np.cumsum([0] + [len(p) for p in est_pts[:-1]])
+    cost = np.empty((len(gt_centers), len(est_pts)))
+    for i, g in enumerate(gt_centers):
+        d = orthogonal_distances(pts, g)
+        ok = np.isfinite(d)
+        cnt = np.add.reduceat(ok.astype(float), starts)
+        tot = np.add.reduceat(np.where(ok, d, 0.0), starts)
+        cost[i] = np.where(cnt >= 2, tot / np.maximum(cnt, 1), np.inf)
+    return cost
+
+
+# ---------------------------------------------------------------- matching
+def _match_arms(est_arms, gt_arms):
+    if len(est_arms) == 0 or len(gt_arms) == 0:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+    diff = np.abs((est_arms[:, None, 0] - gt_arms[None, :, 0] + math.pi) % (2 * math.pi) - math.pi)
+    r, c = linear_sum_assignment(diff)
+    return r, c, diff[r, c]
+
+
+def _lane_key(lane, arm_map):
+    if lane['kind'] == 'connector':
+        if lane['arm'] not in arm_map or lane['arm_to'] not in arm_map:
+            return None
+        return ('connector', arm_map[lane['arm']], arm_map[lane['arm_to']])
+    return (lane['kind'], arm_map[lane['arm']]) if lane['arm'] in arm_map else None
+
+
+def _match_lanes(est_lanes, gt_lanes, arm_map, gate):
+    """-> {gt index: (est index, distance)} for matches within ``gate``."""
+    groups: dict = {}
+    for i, g in enumerate(gt_lanes):
+        key = (('connector', g['arm'], g['arm_to']) if g['kind'] == 'connector'
+               else (g['kind'], g['arm']))
+        groups.setdefault(key, ([], []))[0].append(i)
+    for i, e in enumerate(est_lanes):
+        key = _lane_key(e, arm_map)
+        if key in groups:
+            groups[key][1].append(i)
+    out = {}
+    for gi, ei in groups.values():
+        if not gi or not ei:
+            continue
+        cost = _cost_matrix([est_lanes[e]['pts'] for e in ei],
+                            [simplify(gt_lanes[g]['center']) for g in gi])
+        r, c = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e9))
+        for a, b in zip(r, c):
+            if cost[a, b] <= gate:
+                out[gi[a]] = (ei[b], float(cost[a, b]))
+    return out
+
+
+def _connectivity(est_lanes, gt_lanes, match):
+    """(matched true connectors, of which correctly attached) -- see module docstring."""
+    gt_idx = {g['id']: i for i, g in enumerate(gt_lanes)}
+    pred = {s: i for i, g in enumerate(gt_lanes) for s in g['successors']}
+    n = ok = 0
+    for gi, (ei, _) in match.items():
+        g = gt_lanes[gi]
+        if g['kind'] != 'connector':
+            continue
+        n += 1
+        e = est_lanes[ei]
+        p, s = pred.get(g['id']), gt_idx.get(g['successors'][0]) if g['successors'] else None
+        if p in match and s in match:
+            ep, es = est_lanes[match[p][0]], est_lanes[match[s][0]]
+            ok += int(e['id'] in ep['successors'] and es['id'] in e['successors'])
+    return n, ok
+
+
+# ---------------------------------------------------------------- per case
+def _failed(reason, n_arms_true=None, gt_lanes=None) -> dict:
+    traffic = sum(g['traffic'] > 0 for g in gt_lanes) if gt_lanes is not None else None
+    return {'ok': False, 'reason': reason, 'n_arms_true': n_arms_true, 'n_arms_est': None,
+            'arm_correct': False, 'topology_correct': False, 'center_error_m': None,
+            'angle_error_deg': None, 'arms_matched': 0, 'angle_error_deg_sum': 0.0,
+            'lanes_true': len(gt_lanes) if gt_lanes is not None else None,
+            'lanes_true_traffic': traffic, 'lanes_est': 0, 'lanes_matched': 0,
+            'lanes_matched_traffic': 0, 'lane_error_cm': None, 'lane_error_cm_sum': 0.0,
+            'lane_recall': 0.0 if traffic else None, 'lane_precision': None,
+            'connectors_matched': 0, 'connectors_connected': 0, 'connectivity_recall': None}
+
+
+def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
+    """Metrics of one case; ``estimate``/``gt`` as estimate.json / gt.json dicts (or
+    ``(Intersection, lanelets)`` tuples, or a ``Scenario`` for ``gt``)."""
+    try:
+        gc, ga, gl = _parse(gt, 'gt')
+    except Malformed as e:
+        return _failed(f'malformed ground truth: {e}')
+    try:
+        ec, ea, el = _parse(estimate, 'estimate')
+    except Malformed as e:
+        return _failed(f'malformed estimate: {e}', len(ga), gl)
+    r, c, dang = _match_arms(ea, ga)
+    arm_correct = len(ea) == len(ga)
+    topo = arm_correct and bool(np.all(ea[r, 1:] == ga[c, 1:]))
+    arm_map = {int(a): int(b) for a, b in zip(r, c)}
+    match = _match_lanes(el, gl, arm_map, gate)
+    dists = np.array([d for _, d in match.values()])
+    n_traffic = sum(g['traffic'] > 0 for g in gl)
+    m_traffic = sum(gl[g]['traffic'] > 0 for g in match)
+    n_con, ok_con = _connectivity(el, gl, match)
+    return {'ok': True, 'reason': None, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
+            'arm_correct': arm_correct, 'topology_correct': topo,
+            'center_error_m': float(np.linalg.norm(ec - gc)),
+            'angle_error_deg': float(np.degrees(dang).mean()) if len(dang) else None,
+            'arms_matched': len(dang), 'angle_error_deg_sum': float(np.degrees(dang).sum()),
+            'lanes_true': len(gl), 'lanes_true_traffic': n_traffic, 'lanes_est': len(el),
+            'lanes_matched': len(match), 'lanes_matched_traffic': m_traffic,
+            'lane_error_cm': float(100 * dists.mean()) if len(dists) else None,
+            'lane_error_cm_sum': float(100 * dists.sum()),
+            'lane_recall': m_traffic / n_traffic if n_traffic else None,
+            'lane_precision': len(match) / len(el) if el else None,
+            'connectors_matched': n_con, 'connectors_connected': ok_con,
+            'connectivity_recall': ok_con / n_con if n_con else None}
+
+
+# ---------------------------------------------------------------- summary
+def _ratio(num, den):
+    return num / den if den else None
+
+
+def _pct(values, q):
+    v = [x for x in values if x is not None]
+    return float(np.percentile(v, q)) if v else None
+
+
+def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
+    """Pool per-case metrics (and optional per-case ``timing_ms``) into the summary.
+
+    Accuracies are shares of all cases (failed cases count as wrong); errors are
+    averaged over successful cases, lane error and angle error over matched lanes /
+    arms; recall and precision are pooled over lanes of all cases.
+    """
+    n = len(metrics)
+    ok = [m for m in metrics if m['ok']]
+
+    def total(key):
+        return sum(m.get(key) or 0 for m in metrics)
+
+    center = [m['center_error_m'] for m in ok]
+    timings = timings or []
+    summary = {
+        'n': n, 'n_failed': n - len(ok),
+        'arm_accuracy': _ratio(sum(m['arm_correct'] for m in metrics), n),
+        'topology_accuracy': _ratio(sum(m['topology_correct'] for m in metrics), n),
+        'center_error_m_mean': float(np.mean(center)) if center else None,
+        'center_error_m_median': float(np.median(center)) if center else None,
+        'angle_error_deg_mean': _ratio(total('angle_error_deg_sum'), total('arms_matched')),
+        'lane_error_cm_mean': _ratio(total('lane_error_cm_sum'), total('lanes_matched')),
+        'lane_recall': _ratio(total('lanes_matched_traffic'), total('lanes_true_traffic')),
+        'lane_precision': _ratio(total('lanes_matched'), total('lanes_est')),
+        'connectivity_recall': _ratio(total('connectors_connected'), total('connectors_matched')),
+    }
+    for step in ('topology', 'lanes', 'total'):
+        vals = [t.get(step) for t in timings if t]
+        summary[f'{step}_ms_median'] = _pct(vals, 50)
+        summary[f'{step}_ms_p95'] = _pct(vals, 95)
+    return summary
+
+
+# ---------------------------------------------------------------- CLI
+def format_metrics(m: dict) -> str:
+    """Plain-text ``key: value`` block."""
+    def fmt(v):
+        return f'{v:.4g}' if isinstance(v, float) else str(v)
+    return '\n'.join(f'{k:24s} {fmt(v)}' for k, v in m.items())
+
+
+def _load(path):
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        return {'__error__': f'cannot read {path}: {e}'}
+
+
+def _evaluate_files(est_path, gt_path) -> dict:
+    est, gt = _load(est_path), _load(gt_path)
+    if '__error__' in gt:
+        return _failed(gt['__error__'])
+    if '__error__' in est:
+        return evaluate({}, gt) | {'reason': est['__error__']}
+    return evaluate(est, gt)
+
+
+def _cmd(args) -> int:
+    if args.cases:
+        root = Path(args.cases)
+        dirs = sorted(p for p in root.iterdir() if (p / 'gt.json').exists())
+        if not dirs:
+            print(f'no case folders with gt.json under {root}')
+            return 2
+        per_case = {p.name: _evaluate_files(p / 'estimate.json', p / 'gt.json') for p in dirs}
+        summary = aggregate(list(per_case.values()))
+        out = {'summary': summary, 'cases': per_case}
+        print(format_metrics(summary))
+    elif args.estimate and args.gt:
+        out = _evaluate_files(args.estimate, args.gt)
+        print(format_metrics(out))
+    else:
+        print('evaluate: give ESTIMATE GT or --cases DIR')
+        return 2
+    if args.json:
+        from .estimate_io import dumps
+        Path(args.json).write_text(dumps(out))
+    return 0
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    """Add the ``evaluate`` subcommand (DESIGN.md §5 metrics)."""
+    p = subparsers.add_parser('evaluate', help='score estimate.json against gt.json',
+                              description=__doc__.split('\n\n')[0])
+    p.add_argument('estimate', nargs='?', help='estimate.json')
+    p.add_argument('gt', nargs='?', help='gt.json')
+    p.add_argument('--cases', metavar='DIR',
+                   help='folder of case subfolders, each with estimate.json + gt.json')
+    p.add_argument('--json', metavar='OUT', help='also write the metrics as JSON')
+    p.set_defaults(func=_cmd)
+    return p
