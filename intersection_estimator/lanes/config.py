@@ -1,0 +1,111 @@
+"""Configuration of the lane-course step (paper §III)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+__all__ = ['LaneConfig']
+
+# name -> (low, high, what); bounds are inclusive
+_RANGES = {
+    'station_spacing': (0.5, 20.0, 'distance between border support points [m]'),
+    'connector_spacing': (0.2, 20.0, 'distance between connector support points [m]'),
+    'connector_min_stations': (3, 1000, 'fewest support points of a connector'),
+    'connector_hermite': (0, 1, '1: connectors start as cubic Hermite curves tangent to their lanes, '
+                          '0: straight (paper)'),
+    'arm_length_min': (5.0, 500.0, 'shortest entering/leaving lanelet [m]'),
+    'arm_length_max': (5.0, 500.0, 'longest entering/leaving lanelet [m]'),
+    'stop_margin': (0.0, 20.0, 'extra distance of the stop line beyond the corner of two arms [m]'),
+    'stop_min': (0.0, 100.0, 'smallest stop-line distance from the center [m]'),
+    'stop_max': (0.0, 200.0, 'largest stop-line distance from the center [m]'),
+    'min_part_points': (1, 1000, 'fewest points of a trajectory part that gets a lane'),
+    'assign_gate': (0.1, 50.0, 'largest distance of a part mean to its lane center line [m]'),
+    'min_connector_evidence': (1, 1000, 'trajectories needed to create a connector'),
+    'point_gate': (0.1, 50.0, 'trajectory points farther from their lane sequence are ignored [m]'),
+    'sigma_perp': (0.01, 10.0, 'std of d_perp in the likelihood [m] (paper §III-C)'),
+    'outlier_weight': (0.0, 1.0, 'weight of a uniform outlier component per point'),
+    'sigma_delta': (1e-3, 10.0, 'std of the smoothness delta_l per lanelet [rad] (paper §III-C)'),
+    'tau': (0.0, 1000.0, 'exponent tau of the shared-border term s(I2)^tau'),
+    'width_min': (0.5, 10.0, 'narrowest lanelet [m]'),
+    'width_max': (0.5, 20.0, 'widest lanelet [m]'),
+    'merge_radius': (0.0, 5.0, 'border points closer than this are split/merge candidates [m]'),
+    'step_center': (1e-3, 5.0, 'std of a center-point move [m]'),
+    'step_border': (1e-3, 5.0, 'std of a border-point move [m]'),
+    'split_max': (0.0, 5.0, 'largest split distance Delta b [m] (paper: 0.6)'),
+    'p_center': (0.0, 1.0, 'probability of a center-point move'),
+    'p_border': (0.0, 1.0, 'probability of a border-point move'),
+    'p_split': (0.0, 1.0, 'probability of a split move'),
+    'p_merge': (0.0, 1.0, 'probability of a merge move'),
+    'temp_start': (1e-4, 1e4, 'annealing temperature at sample 0'),
+    'temp_end': (1e-4, 1e4, 'annealing temperature after anneal_samples'),
+    'anneal_samples': (1, 10**9, 'length of the geometric annealing schedule'),
+    'refine': (0, 1, 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
+    'refine_init': (0, 1, 'penalised least-squares refinement of the initialisation'),
+    'refine_smooth': (0.0, 1e6, 'weight of the second-difference penalty of the refinement'),
+    'refine_smooth_connector': (0.0, 1e6, 'second-difference weight inside connectors'),
+    'refine_jerk': (0.0, 1e6, 'weight of the third-difference penalty of the refinement'),
+    'refine_width': (0.0, 1e6, 'weight pulling lane widths to their topology width'),
+    'refine_iters': (1, 50, 'Gauss-Newton iterations of the refinement'),
+    'refine_huber': (0.01, 100.0, 'Huber threshold of the refinement residuals [m]'),
+}
+
+
+@dataclass(frozen=True)
+class LaneConfig:
+    """Parameters of :class:`LaneCourseEstimator`; ``validate()`` checks their ranges."""
+
+    station_spacing: float = 2.5
+    connector_spacing: float = 1.0
+    connector_min_stations: int = 6
+    connector_hermite: int = 1
+    arm_length_min: float = 20.0
+    arm_length_max: float = 120.0
+    stop_margin: float = 1.0
+    stop_min: float = 3.0
+    stop_max: float = 40.0
+    min_part_points: int = 3
+    assign_gate: float = 6.0
+    min_connector_evidence: int = 1
+    point_gate: float = 6.0
+    sigma_perp: float = 1.0
+    outlier_weight: float = 0.01
+    sigma_delta: float = 0.15
+    tau: float = 1.0
+    width_min: float = 2.0
+    width_max: float = 6.0
+    merge_radius: float = 0.6
+    step_center: float = 0.15
+    step_border: float = 0.15
+    split_max: float = 0.6
+    p_center: float = 0.6
+    p_border: float = 0.2
+    p_split: float = 0.1
+    p_merge: float = 0.1
+    temp_start: float = 1.0
+    temp_end: float = 0.05
+    anneal_samples: int = 20000
+    refine: int = 1
+    refine_init: int = 1
+    refine_smooth: float = 20.0
+    refine_smooth_connector: float = 1.0
+    refine_jerk: float = 0.0
+    refine_width: float = 1.0
+    refine_iters: int = 4
+    refine_huber: float = 2.0
+
+    def validate(self) -> 'LaneConfig':
+        """Raise ``ValueError`` naming the first parameter outside its allowed range."""
+        for f in fields(self):
+            lo, hi, what = _RANGES[f.name]
+            v = getattr(self, f.name)
+            if not (lo <= v <= hi):
+                raise ValueError(f'LaneConfig.{f.name}={v!r} outside [{lo}, {hi}] ({what})')
+        if self.arm_length_min > self.arm_length_max:
+            raise ValueError('LaneConfig.arm_length_min must be <= arm_length_max')
+        if self.stop_min > self.stop_max:
+            raise ValueError('LaneConfig.stop_min must be <= stop_max')
+        if self.width_min >= self.width_max:
+            raise ValueError('LaneConfig.width_min must be < width_max')
+        if self.p_center + self.p_border + self.p_split + self.p_merge <= 0:
+            raise ValueError('LaneConfig.p_center+p_border+p_split+p_merge must be > 0')
+        return self

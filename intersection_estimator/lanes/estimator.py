@@ -1,0 +1,261 @@
+"""Anytime lane-course estimator (paper §III) with the API of the topology step."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..model import Intersection, Lanelet
+from ..observations import Detections
+from .config import LaneConfig
+from .init import assign_parts, lane_specs, trajectories
+from .likelihood import all_terms, assign_points, station_csr
+from .mcmc import run_chain
+from .model import LaneGraph, build_graph
+from .prior import all_angles, angle_csr, log_prior
+from .refine import refine_offsets
+
+__all__ = ['LaneCourseEstimator', 'lanelets_from_topology']
+
+
+def lanelets_from_topology(topology: Intersection, length: float = 60.0,
+                           config: LaneConfig | None = None) -> list[Lanelet]:
+    """Straight entering/leaving lanelets of a topology (raw-detection mode, no tracks)."""
+    cfg = (config or LaneConfig()).validate()
+    specs, pairs, _ = lane_specs(topology, [], cfg, length=length, connectors=False)
+    return build_graph(specs, pairs).lanelets() if specs else []
+
+
+def _topology_key(t: Intersection):
+    return (round(float(t.center[0]) * 4), round(float(t.center[1]) * 4), t.traffic_side,
+            tuple((round(np.degrees(a.angle) * 2), round(a.gap * 4), a.lanes_in, a.lanes_out,
+                   round(a.lane_width * 4)) for a in t.arms))
+
+
+def _respace(graph: LaneGraph, lane: int) -> None:
+    """Equidistant stations along a connector's current center line (ends stay put)."""
+    o, n = graph.st_off[lane], graph.st_n[lane]
+    g = np.arange(o, o + n)
+    L, R = graph.P[graph.ref[2 * g]], graph.P[graph.ref[2 * g + 1]]
+    c = 0.5 * (L + R)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
+    if s[-1] < 1e-6:
+        return
+    nrm = graph.st_normal[g]
+    wl, wr = ((L - c) * nrm).sum(1), ((c - R) * nrm).sum(1)
+    snew = np.linspace(0.0, s[-1], n)
+    cn = np.stack([np.interp(snew, s, c[:, 0]), np.interp(snew, s, c[:, 1])], axis=1)
+    t = np.gradient(cn, axis=0)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    nn = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    wl, wr = np.interp(snew, s, wl), np.interp(snew, s, wr)
+    sp = graph.specs[lane]
+    nn[0] = graph.st_normal[graph.st_off[sp.predecessor] + graph.st_n[sp.predecessor] - 1]
+    nn[-1] = graph.st_normal[graph.st_off[sp.successor]]
+    graph.st_normal[g] = nn
+    for i in range(1, n - 1):
+        pl, pr = graph.ref[2 * (o + i)], graph.ref[2 * (o + i) + 1]
+        graph.P[pl] = cn[i] + wl[i] * nn[i]
+        graph.P[pr] = cn[i] - wr[i] * nn[i]
+        graph.axis[pl] = graph.axis[pr] = nn[i]
+        graph.P[graph.home[2 * (o + i)]] = graph.P[pl]
+        graph.P[graph.home[2 * (o + i) + 1]] = graph.P[pr]
+
+
+def _connector_pairs(graph: LaneGraph, radius: float) -> list[tuple[int, int]]:
+    """Right border slot of a connector next to a left border slot of another one."""
+    conn = [i for i, s in enumerate(graph.specs) if s.kind == 'connector']
+    if len(conn) < 2 or radius <= 0:
+        return []
+    cand = []
+    for a in conn:
+        ga = np.arange(graph.st_off[a] + 1, graph.st_off[a] + graph.st_n[a] - 1)
+        for b in conn:
+            if a == b:
+                continue
+            gb = np.arange(graph.st_off[b] + 1, graph.st_off[b] + graph.st_n[b] - 1)
+            if not len(ga) or not len(gb):
+                continue
+            Ra, Lb = graph.P[graph.ref[2 * ga + 1]], graph.P[graph.ref[2 * gb]]
+            D = np.linalg.norm(Ra[:, None] - Lb[None], axis=2)
+            same = (graph.st_normal[ga][:, None] * graph.st_normal[gb][None]).sum(2) > 0.9
+            i, j = np.nonzero((D < radius) & same)
+            cand += [(D[x, y], 2 * ga[x] + 1, 2 * gb[y]) for x, y in zip(i, j)]
+    used, out = set(), []
+    for _, sa, sb in sorted(cand):
+        if sa not in used and sb not in used:
+            used.update((sa, sb))
+            out.append((sa, sb))
+    return out
+
+
+class LaneCourseEstimator:
+    """Lane course by MCMC over a lanelet graph (paper §III), anytime and warm-startable.
+
+    ``initialise(topology, dets)`` builds the lanelets from the topology and the
+    trajectories (rows with ``track_id >= 0``); it keeps the chain when neither the
+    topology nor the set of evidenced connectors changed. ``run`` draws samples.
+    """
+
+    def __init__(self, config: LaneConfig | None = None, seed=0):
+        self.config = (config or LaneConfig()).validate()
+        self.rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        self.samples_drawn = 0
+        self.graph: LaneGraph | None = None
+        self._key = None
+        self._k = 0
+        self.timings: dict = {}
+
+    # ------------------------------------------------------------------ setup
+    def initialise(self, topology: Intersection, dets: Detections | None) -> None:
+        cfg = self.config
+        t0 = time.perf_counter()
+        trajs = trajectories(dets)
+        assign_parts(trajs, topology, cfg)
+        specs, pairs, _ = lane_specs(topology, trajs, cfg)
+        key = (_topology_key(topology), tuple(s.id for s in specs))
+        self._trajs = trajs
+        if self.graph is not None and key == self._key:
+            self._setup_likelihood()
+            self.timings['initialise'] = time.perf_counter() - t0
+            return
+        self._key = key
+        self._k = 0
+        self.graph = build_graph(specs, pairs) if specs else None
+        if self.graph is None:
+            self.timings['initialise'] = time.perf_counter() - t0
+            return
+        g = self.graph
+        self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
+        self._setup_likelihood()
+        if cfg.refine_init and len(self._Q):
+            self._refine(assign=True)
+            for i, s in enumerate(g.specs):
+                if s.kind == 'connector':
+                    _respace(g, i)
+            self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
+        extra = _connector_pairs(g, cfg.merge_radius)
+        if extra:
+            g.pair_a = np.concatenate([g.pair_a, [a for a, _ in extra]]).astype(np.int64)
+            g.pair_b = np.concatenate([g.pair_b, [b for _, b in extra]]).astype(np.int64)
+            g.pair_merged = np.concatenate([g.pair_merged, np.zeros(len(extra), np.bool_)])
+        self._setup_likelihood()
+        self.timings['initialise'] = time.perf_counter() - t0
+
+    def _sequences(self):
+        """(points, lanelet indices) per trajectory: its entering, connector, leaving lanelet."""
+        index = {s.id: i for i, s in enumerate(self.graph.specs)}
+        from .init import connector_id, lane_id
+        from ..model import ENTERING, LEAVING
+        seqs = []
+        for tr in self._trajs:
+            e = index.get(lane_id(tr.lane_in[0], ENTERING, tr.lane_in[1])) if tr.lane_in else None
+            o = index.get(lane_id(tr.lane_out[0], LEAVING, tr.lane_out[1])) if tr.lane_out else None
+            c = index.get(connector_id(*tr.lane_in, *tr.lane_out)) if e is not None and \
+                o is not None else None
+            lanes = [i for i in (e, c, o) if i is not None]
+            if not lanes:
+                continue
+            pts = tr.xy if (e is not None and o is not None) else \
+                (tr.xy[:tr.split + 1] if e is not None else tr.xy[tr.split:])
+            seqs.append((pts, lanes))
+        return seqs
+
+    def _assign(self):
+        g = self.graph
+        self._Q, self._lo, self._hi, _ = assign_points(g.centers(), g.st_off, g.st_n,
+                                                       self._seqs, self.config.point_gate)
+        return self._Q, self._lo, self._hi
+
+    def _setup_likelihood(self) -> None:
+        g, cfg = self.graph, self.config
+        self._seqs = self._sequences()
+        self._assign()
+        self._pdep = station_csr(g.n_stations(), self._lo, self._hi)
+        self._adep = angle_csr(g.prev_st, g.next_st)
+        self._recompute()
+
+    def _recompute(self) -> float:
+        """Reference evaluation of all cached terms; returns the log posterior."""
+        g, cfg = self.graph, self.config
+        self._C = g.centers()
+        self._ang = np.zeros(g.n_stations())
+        self._delta = np.zeros(len(g.specs))
+        all_angles(self._C, g.prev_st, g.next_st, g.st_ll, self._ang, self._delta)
+        self._term = np.zeros(len(self._Q))
+        lik = all_terms(self._C, self._Q, self._lo, self._hi, self._inv2s2(), self._eps(),
+                        self._term)
+        return lik + log_prior(self._delta, 0.5 / cfg.sigma_delta ** 2, cfg.tau, g.n_shared())
+
+    def _inv2s2(self):
+        return 0.5 / self.config.sigma_perp ** 2
+
+    def _eps(self):
+        return self.config.outlier_weight
+
+    def log_posterior(self) -> float:
+        """Log posterior (up to a constant) of the current state, recomputed from scratch."""
+        return self._recompute() if self.graph is not None else 0.0
+
+    def _refine(self, assign: bool = False) -> None:
+        cfg = self.config
+        refine_offsets(self.graph, self._Q, self._lo, self._hi, self._width0,
+                       sigma=cfg.sigma_perp, smooth=cfg.refine_smooth,
+                       smooth_connector=cfg.refine_smooth_connector, jerk=cfg.refine_jerk,
+                       width=cfg.refine_width,
+                       iters=cfg.refine_iters, huber=cfg.refine_huber,
+                       assign=self._assign if assign else None)
+
+    # ------------------------------------------------------------------ sampling
+    def _params(self) -> np.ndarray:
+        c = self.config
+        return np.array([self._inv2s2(), self._eps(), 0.5 / c.sigma_delta ** 2, c.tau,
+                         c.width_min, c.width_max, c.step_center, c.step_border, c.split_max,
+                         c.p_center, c.p_border, c.p_split + c.p_merge, c.temp_start,
+                         c.temp_end, float(c.anneal_samples)])
+
+    def _chain(self, n: int) -> None:
+        g = self.graph
+        bP, bref, bm = g.P.copy(), g.ref.copy(), g.pair_merged.copy()
+        _, cur, best = run_chain(
+            n, self._k, int(self.rng.integers(2 ** 31 - 1)), self._params(), g.P, g.axis, g.ref,
+            g.home, g.users, g.nusers, g.st_normal, g.st_ll, g.pair_a, g.pair_b,
+            g.pair_merged, g.prev_st, g.next_st, self._adep[0], self._adep[1], self._ang,
+            self._delta, self._C, self._Q, self._lo, self._hi, self._pdep[0], self._pdep[1],
+            self._term, bP, bref, bm)
+        if best > cur:
+            g.set_state((bP, bref, bm))
+            self._recompute()
+        self._k += n
+
+    def run(self, n_samples: int | None = None, time_budget_s: float | None = None) -> int:
+        """Draw ``n_samples`` (default 20000) or as many as fit into ``time_budget_s``."""
+        if self.graph is None:
+            return 0
+        t0 = time.perf_counter()
+        drawn = 0
+        if time_budget_s is None:
+            n = 20000 if n_samples is None else int(n_samples)
+            if n > 0:
+                self._chain(n)
+            drawn = max(n, 0)
+        else:
+            chunk = 500
+            while time.perf_counter() - t0 < time_budget_s and \
+                    (n_samples is None or drawn < n_samples):
+                n = chunk if n_samples is None else min(chunk, n_samples - drawn)
+                self._chain(n)
+                drawn += n
+        self.timings['mcmc'] = time.perf_counter() - t0
+        if self.config.refine and len(self._Q):
+            t1 = time.perf_counter()
+            self._refine()
+            self._recompute()
+            self.timings['refine'] = time.perf_counter() - t1
+        self.samples_drawn += drawn
+        return drawn
+
+    @property
+    def lanelets(self) -> list[Lanelet]:
+        return self.graph.lanelets() if self.graph is not None else []

@@ -1,0 +1,60 @@
+"""Lane-course prior (paper §III-C): P(I_2) = s(I_2)^tau * prod_l N(delta_l; 0, sigma_delta).
+
+``delta_l`` is the sum of absolute direction changes along the center line of
+lanelet ``l``; for connectors it includes the junctions with the predecessor and
+successor lanelet (their neighbouring center points), so a connector that kinks
+where it meets its lanes pays for it. ``s(I_2)`` is the number of shared (merged)
+border points; we use ``tau * log(1 + s)`` so that ``s = 0`` stays finite.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ['station_angle', 'all_angles', 'log_prior', 'angle_csr']
+
+
+@njit(cache=True)
+def station_angle(C, prev_st, next_st, g):
+    """|angle between (c_g - c_prev) and (c_next - c_g)|, 0 at open ends."""
+    a, b = prev_st[g], next_st[g]
+    if a < 0 or b < 0:
+        return 0.0
+    ux, uy = C[g, 0] - C[a, 0], C[g, 1] - C[a, 1]
+    vx, vy = C[b, 0] - C[g, 0], C[b, 1] - C[g, 1]
+    return abs(math.atan2(ux * vy - uy * vx, ux * vx + uy * vy))
+
+
+@njit(cache=True)
+def all_angles(C, prev_st, next_st, st_ll, ang, delta):
+    """Reference recomputation of every station angle and every delta_l."""
+    delta[:] = 0.0
+    for g in range(len(ang)):
+        ang[g] = station_angle(C, prev_st, next_st, g)
+        delta[st_ll[g]] += ang[g]
+
+
+@njit(cache=True)
+def log_prior(delta, inv2sd2, tau, n_shared):
+    s = 0.0
+    for d in delta:
+        s -= d * d * inv2sd2
+    return s + tau * math.log(1.0 + n_shared)
+
+
+def angle_csr(prev_st: np.ndarray, next_st: np.ndarray):
+    """CSR (ptr, idx): for each station the stations whose angle uses its center."""
+    n = len(prev_st)
+    lists = [[] for _ in range(n)]
+    for h in range(n):
+        if prev_st[h] < 0 or next_st[h] < 0:
+            continue
+        for g in (h, prev_st[h], next_st[h]):
+            lists[g].append(h)
+    ptr = np.zeros(n + 1, np.int64)
+    ptr[1:] = np.cumsum([len(x) for x in lists])
+    idx = np.array([h for x in lists for h in x], np.int64)
+    return ptr, idx
