@@ -1,0 +1,116 @@
+"""Benchmark runner (issue 4): oracle sanity row, JSON interface, estimator plumbing."""
+
+import argparse
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from intersection_estimator import bench
+from intersection_estimator.bench import BenchOptions, format_table, is_perfect, run_bench
+from intersection_estimator.evaluate import SUMMARY_KEYS
+from intersection_estimator.model import Lanelet
+from intersection_estimator.sim import SimConfig, simulate_scenario
+
+CONFIG_KEYS = {'n', 'mode', 'samples', 'lane_samples', 'seed', 'jobs', 'oracle', 'estimator',
+               'sim_config', 'package_version', 'machine', 'timing_note'}
+CASE_KEYS = {'seed', 'true', 'estimate', 'metrics', 'timing_ms'}
+
+
+def _cli(argv):
+    ap = argparse.ArgumentParser()
+    bench.register(ap.add_subparsers())
+    args = ap.parse_args(argv)
+    return args.func(args)
+
+
+def test_oracle_is_perfect_and_json_has_documented_keys(tmp_path, capsys):
+    out = tmp_path / 'bench.json'
+    assert _cli(['bench', '--n', '3', '--oracle', '--seed', '5', '--json', str(out)]) == 0
+    text = capsys.readouterr().out
+    assert 'lane-level topology accuracy' in text and '92.28 %' in text
+    assert text.count('100.00 %') >= 5
+    doc = json.loads(out.read_text())
+    assert set(doc) == {'config', 'summary', 'cases'}
+    assert CONFIG_KEYS <= set(doc['config'])
+    assert doc['config']['machine']['cpu_count'] >= 1
+    assert doc['config']['sim_config'] == SimConfig().to_dict()
+    assert set(SUMMARY_KEYS) <= set(doc['summary'])
+    s = doc['summary']
+    assert s['n'] == 3 and is_perfect(s)
+    assert s['arm_accuracy'] == s['topology_accuracy'] == s['lane_recall'] == 1.0
+    assert s['connectivity_recall'] == 1.0 and s['center_error_m_mean'] == 0.0
+    assert [c['seed'] for c in doc['cases']] == [5, 6, 7]
+    for c in doc['cases']:
+        assert set(c) == CASE_KEYS
+        assert {'center', 'arms'} <= set(c['true']) and c['estimate']['arms'] == c['true']['arms']
+        assert c['metrics']['ok'] and c['metrics']['topology_correct']
+
+
+def _shifted_gt_estimator(calls, shift=0.2, fail_seed=None):
+    """Fake pipeline.estimate: the scenario's GT with every lane moved 0.2 m sideways."""
+    def estimate(dets, *, mode, topology_samples, lane_samples, seed):
+        calls.append((len(dets), mode, topology_samples, lane_samples, seed))
+        if seed == fail_seed:
+            raise RuntimeError('chain diverged')
+        sc = simulate_scenario(seed)
+        lanes = []
+        for ll in sc.gt_lanelets:
+            t = np.gradient(ll.center, axis=0)
+            n = np.stack([-t[:, 1], t[:, 0]], 1) / np.linalg.norm(t, axis=1, keepdims=True)
+            lanes.append(Lanelet(id='x' + ll.id, kind=ll.kind, arm=ll.arm, arm_to=ll.arm_to,
+                                 left=ll.left, right=ll.right, center=ll.center + shift * n,
+                                 successors=['x' + s for s in ll.successors]))
+        return SimpleNamespace(intersection=sc.gt, lanelets=lanes,
+                               timing_ms={'topology': 5.0 + seed, 'lanes': 7.0, 'total': 12.0 + seed})
+    return estimate
+
+
+def test_estimator_is_called_and_scored(monkeypatch):
+    calls = []
+    monkeypatch.setattr(bench, '_load_estimator', lambda: _shifted_gt_estimator(calls))
+    res = run_bench(BenchOptions(n=3, mode='raw', samples=123, lane_samples=456, seed=10))
+    assert [c[1:] for c in calls] == [('raw', 123, 456, s) for s in (10, 11, 12)]
+    assert all(c[0] == len(simulate_scenario(s).detections('raw')) for c, s in zip(calls, (10, 11, 12)))
+    s = res['summary']
+    assert s['topology_accuracy'] == 1.0 and s['lane_recall'] == 1.0
+    assert s['lane_error_cm_mean'] == pytest.approx(20.0, abs=0.3)
+    assert s['topology_ms_median'] == 16.0 and s['lanes_ms_median'] == 7.0
+    assert s['total_ms_median'] == 23.0
+    assert res['cases'][0]['timing_ms']['simulate'] > 0
+    table = format_table(res)
+    assert '55.4' in table and '84.90 %' in table   # raw-mode paper figures
+
+
+def test_estimator_errors_become_failed_cases(monkeypatch):
+    calls = []
+    est = _shifted_gt_estimator(calls, fail_seed=1)
+    res = run_bench(BenchOptions(n=3, seed=0), estimator=est)
+    bad = res['cases'][1]['metrics']
+    assert not bad['ok'] and 'chain diverged' in bad['reason'] and res['cases'][1]['estimate'] is None
+    assert res['summary']['n_failed'] == 1
+    assert res['summary']['topology_accuracy'] == pytest.approx(2 / 3)
+    assert not is_perfect(res['summary'])
+
+
+def test_lane_samples_zero_scores_topology_only():
+    res = run_bench(BenchOptions(n=2, lane_samples=0, oracle=True))
+    s = res['summary']
+    assert s['topology_accuracy'] == 1.0
+    assert s['lane_recall'] is None and s['lane_error_cm_mean'] is None
+
+
+def test_no_estimator_module_means_exit_2(monkeypatch):
+    def missing():
+        raise ImportError('no pipeline yet')
+    monkeypatch.setattr(bench, '_load_estimator', missing)
+    assert _cli(['bench', '--n', '1']) == 2
+
+
+def test_jobs_2_spawn_workers_give_the_same_cases():
+    one = run_bench(BenchOptions(n=2, oracle=True, jobs=1))
+    two = run_bench(BenchOptions(n=2, oracle=True, jobs=2))
+    strip = [{k: v for k, v in c.items() if k != 'timing_ms'} for c in one['cases']]
+    assert strip == [{k: v for k, v in c.items() if k != 'timing_ms'} for c in two['cases']]
+    assert 'shared' in two['config']['timing_note']
