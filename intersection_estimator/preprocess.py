@@ -1,0 +1,399 @@
+"""Preprocessing of the topology step (paper §II-A): detections -> ObservationSet.
+
+Three input kinds, decided per row of :class:`observations.Detections`:
+
+* tracked objects (``track_id >= 0``): each trajectory is split at its point closest to
+  the current center; each part becomes one observation (mean point, mean direction,
+  weight 1). Parts that are too short (false tracks of static clutter) are dropped.
+* radar (finite ``doppler``, no id): clutter filter (|doppler| and RCS), driving direction
+  from the Doppler sign generalised with the center estimate -- with the line of sight
+  ``los = (p - s)/|p - s|`` and radial ``r = (p - c)/|p - c|`` a detection is *leaving* iff
+  ``doppler * <r, los> > 0`` (the paper's rule "v > 0 leaving, flipped behind the
+  sensor" is the special case of a sensor on an arm); rows with ``|<r, los>|`` small are
+  ambiguous and dropped. Then voxelisation per direction class (count-weighted voxels).
+* lidar / camera objects (finite ``heading``, no id, no doppler): voxelised per heading
+  sector with the mean heading as orientation.
+
+Also the data-driven initialisation: center where the observed driving lines meet
+(robust least squares) and arm angles from a histogram of outward driving directions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from .likelihood import ObservationSet
+from .model import wrap_angle
+from .observations import Detections
+
+__all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations',
+           'heading_observations', 'preprocess', 'voxelise', 'seed_lines',
+           'initial_center', 'initial_arm_angles']
+
+
+@dataclass(frozen=True)
+class PreprocessConfig:
+    voxel_size: float = 2.0             # [m] raw / heading voxel edge
+    heading_sectors: int = 8            # heading voxelisation: sectors of 360/n deg
+    weight_power: float = 1.0           # voxel weight = count ** power * weight_scale
+    weight_scale: float = 1.0
+    min_doppler: float = 0.5            # [m/s] |doppler| below: static -> dropped
+    min_rcs: float = 0.0                # [dBsm] below: clutter -> dropped (NaN rcs kept)
+    min_radial_cos: float = 0.25        # |<r, los>| below: direction ambiguous -> dropped
+    min_part_points: int = 3            # trajectory parts with fewer points are dropped
+    min_part_length: float = 5.0        # [m] ... or shorter extent (static false tracks)
+    trim_turn_deg: float = 15.0         # keep a part's straight run (0: whole part, paper)
+    min_center_dist: float = 0.0        # [m] observations closer to the center dropped
+
+
+def _unit(vx, vy):
+    n = np.hypot(vx, vy)
+    ok = n > 1e-9
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(ok, vx / n, 0.0), np.where(ok, vy / n, 0.0), ok
+
+
+def _direction_class(x, y, hx, hy, center):
+    """+1 entering (moving toward the center), -1 leaving."""
+    return np.where(hx * (center[0] - x) + hy * (center[1] - y) > 0, 1.0, -1.0)
+
+
+def voxelise(xy: np.ndarray, cls: np.ndarray, size: float, vec: np.ndarray | None = None):
+    """Merge points per (voxel, class): mean position, count (and summed vectors)."""
+    if len(xy) == 0:
+        return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2))
+    ij = np.floor(xy / size).astype(np.int64)
+    key = (((ij[:, 0] + (1 << 20)) << 22) + (ij[:, 1] + (1 << 20))) * 64 + cls.astype(np.int64)
+    uk, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    mx = np.bincount(inv, xy[:, 0], len(uk)) / cnt
+    my = np.bincount(inv, xy[:, 1], len(uk)) / cnt
+    first = np.zeros(len(uk), np.int64)
+    first[inv[::-1]] = np.arange(len(inv))[::-1]
+    sv = np.zeros((len(uk), 2))
+    if vec is not None:
+        sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
+                       np.bincount(inv, vec[:, 1], len(uk))], axis=1)
+    return np.stack([mx, my], axis=1), cls[first], cnt.astype(np.float64), sv
+
+
+def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
+    """Split trajectories at the point closest to ``center``; mean point + direction."""
+    sel = dets.track_id >= 0
+    if not sel.any():
+        return ObservationSet.empty()
+    tid, t, xy, hd = dets.track_id[sel], dets.t[sel], dets.xy[sel], dets.heading[sel]
+    order = np.lexsort((t, tid))
+    tid, xy, hd = tid[order], xy[order], hd[order]
+    starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
+    ends = np.r_[starts[1:], len(tid)]
+    c = np.asarray(center, float)
+    out = []
+    for a, b in zip(starts, ends):
+        p = xy[a:b]
+        i = int(np.argmin(np.sum((p - c) ** 2, axis=1)))
+        for lo, hi, outward in ((0, i + 1, False), (i, len(p), True)):
+            part = p[lo:hi]
+            if len(part) < cfg.min_part_points:
+                continue
+            if np.hypot(*(part.max(axis=0) - part.min(axis=0))) < cfg.min_part_length:
+                continue
+            h = hd[a + lo:a + hi]
+            if not np.isfinite(h).all():
+                h = _path_heading(part)
+            if cfg.trim_turn_deg > 0:
+                keep = _straight_run(h, outward, math.radians(cfg.trim_turn_deg))
+                part, h = part[keep], h[keep]
+            out.append((*part.mean(axis=0), np.cos(h).sum(), np.sin(h).sum()))
+    if not out:
+        return ObservationSet.empty()
+    o = np.asarray(out)
+    hx, hy, ok = _unit(o[:, 2], o[:, 3])
+    d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
+    obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)))
+    return _drop_near_center(obs, c, cfg)
+
+
+def _path_heading(p: np.ndarray) -> np.ndarray:
+    """Heading from the positions (central differences) when the rows carry none."""
+    if len(p) < 2:
+        return np.zeros(len(p))
+    d = np.gradient(p, axis=0)
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+def _straight_run(h: np.ndarray, outward: bool, tol: float, win: int = 5) -> slice:
+    """The straight section of a trajectory part, from its far end toward the center.
+
+    The reference direction is the mean heading of the farthest fifth of the part; the
+    run ends where the moving average (``win`` points) of the heading deviation exceeds
+    ``tol`` -- the turn inside the intersection box, which would bias the mean point and
+    direction of the part (beyond the paper: it reduces the whole part).
+    """
+    n = len(h)
+    hh = h[::-1] if outward else h           # far end first
+    k = max(3, n // 5)
+    ref = math.atan2(np.sin(hh[:k]).sum(), np.cos(hh[:k]).sum())
+    dev = np.abs(wrap_angle(hh - ref))
+    if n > win:
+        dev = np.convolve(dev, np.ones(win) / win, mode='same')
+    bad = np.flatnonzero(dev > tol)
+    m = int(bad[0]) if len(bad) else n
+    m = max(m, min(n, 3))
+    return slice(n - m, n) if outward else slice(0, m)
+
+
+def radar_filter(dets: Detections, cfg: PreprocessConfig) -> np.ndarray:
+    """Mask of radar rows that survive the Doppler / RCS clutter filter (paper §II-A)."""
+    m = (dets.track_id < 0) & np.isfinite(dets.doppler) & (np.abs(dets.doppler) >= cfg.min_doppler)
+    rcs = dets.rcs
+    m &= ~(np.isfinite(rcs) & (rcs < cfg.min_rcs))
+    return m
+
+
+def radar_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
+    """Doppler -> driving direction relative to ``center``, then voxelise per class."""
+    m = radar_filter(dets, cfg)
+    if not m.any():
+        return ObservationSet.empty()
+    c = np.asarray(center, float)
+    xy, dop, sxy = dets.xy[m], dets.doppler[m], dets.sensor_xy[m]
+    rx, ry, okr = _unit(xy[:, 0] - c[0], xy[:, 1] - c[1])
+    has_s = np.isfinite(sxy).all(axis=1)
+    lx, ly, okl = _unit(xy[:, 0] - np.where(has_s, sxy[:, 0], c[0]),
+                        xy[:, 1] - np.where(has_s, sxy[:, 1], c[1]))
+    proj = rx * lx + ry * ly
+    keep = okr & okl & (np.abs(proj) >= cfg.min_radial_cos)
+    d = np.where(dop * proj > 0, -1.0, 1.0)[keep]
+    vxy, vcls, cnt, _ = voxelise(xy[keep], (d > 0).astype(np.int64), cfg.voxel_size)
+    dcls = np.where(vcls > 0, 1.0, -1.0)
+    z = np.zeros(len(vxy))
+    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), z, z.copy(), np.zeros(len(vxy), np.bool_),
+                         dcls, cfg.weight_scale * cnt ** cfg.weight_power)
+    return _drop_near_center(obs, c, cfg)
+
+
+def heading_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
+    """Lidar/camera rows (heading, no id, no Doppler): voxelise per heading sector."""
+    m = (dets.track_id < 0) & np.isfinite(dets.heading) & ~np.isfinite(dets.doppler)
+    if not m.any():
+        return ObservationSet.empty()
+    xy, h = dets.xy[m], dets.heading[m]
+    sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
+    vec = np.stack([np.cos(h), np.sin(h)], axis=1)
+    vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
+                               cfg.voxel_size, vec)
+    hx, hy, ok = _unit(sv[:, 0], sv[:, 1])
+    c = np.asarray(center, float)
+    d = _direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
+    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, ok, d,
+                         cfg.weight_scale * cnt ** cfg.weight_power)
+    return _drop_near_center(obs, c, cfg)
+
+
+def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig) -> ObservationSet:
+    if cfg.min_center_dist <= 0 or len(obs) == 0:
+        return obs
+    keep = np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist
+    return ObservationSet(*[np.ascontiguousarray(getattr(obs, f)[keep])
+                            for f in ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w')])
+
+
+def preprocess(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
+    """All observation kinds of ``dets`` for the current ``center`` (paper §II-A)."""
+    dets = dets.finite()
+    return ObservationSet.concat([tracked_observations(dets, center, cfg),
+                                  radar_observations(dets, center, cfg),
+                                  heading_observations(dets, center, cfg)])
+
+
+# ----------------------------------------------------------------------------- initialisation
+
+def seed_lines(dets: Detections, cfg: PreprocessConfig):
+    """Driving lines (point, unit direction, weight) for the initial center, center-free.
+
+    Rows with a heading (tracked or not) are voxelised per heading sector; radar rows
+    surviving the clutter filter are voxelised and get their direction from a local PCA
+    of neighbouring voxels (weighted by its anisotropy).
+    """
+    dets = dets.finite()
+    m = np.isfinite(dets.heading) & ~np.isfinite(dets.doppler)
+    pts, dirs, wts = [], [], []
+    if m.any():
+        h = dets.heading[m]
+        sector = np.floor(np.mod(h, 2 * math.pi) / (2 * math.pi) * cfg.heading_sectors)
+        vec = np.stack([np.cos(h), np.sin(h)], axis=1)
+        vxy, _, cnt, sv = voxelise(dets.xy[m], sector.astype(np.int64), 2.0 * cfg.voxel_size, vec)
+        hx, hy, ok = _unit(sv[:, 0], sv[:, 1])
+        pts.append(vxy[ok])
+        dirs.append(np.stack([hx, hy], axis=1)[ok])
+        wts.append(np.sqrt(cnt[ok]))
+    r = radar_filter(dets, cfg)
+    if r.any():
+        vxy, _, cnt, _ = voxelise(dets.xy[r], np.zeros(int(r.sum()), np.int64), 2.0 * cfg.voxel_size)
+        if len(vxy) > 1500:
+            keep = np.argsort(-cnt, kind='stable')[:1500]
+            vxy, cnt = vxy[keep], cnt[keep]
+        d2 = np.sum((vxy[:, None, :] - vxy[None, :, :]) ** 2, axis=2)
+        nb = (d2 < 64.0) * cnt[None, :]
+        sw = nb.sum(axis=1)
+        mu = nb @ vxy / sw[:, None]
+        dx = vxy[None, :, 0] - mu[:, None, 0]
+        dy = vxy[None, :, 1] - mu[:, None, 1]
+        sxx, syy, sxy = (nb * dx * dx).sum(1) / sw, (nb * dy * dy).sum(1) / sw, (nb * dx * dy).sum(1) / sw
+        theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+        tr = sxx + syy
+        aniso = np.sqrt((sxx - syy) ** 2 + 4 * sxy ** 2) / np.maximum(tr, 1e-9)
+        pts.append(vxy)
+        dirs.append(np.stack([np.cos(theta), np.sin(theta)], axis=1))
+        wts.append(np.sqrt(cnt) * aniso ** 2)
+    if not pts:
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
+    return np.concatenate(pts), np.concatenate(dirs), np.concatenate(wts)
+
+
+def initial_center(p: np.ndarray, o: np.ndarray, w: np.ndarray, scale: float = 6.0,
+                   iters: int = 30) -> np.ndarray | None:
+    """Robust point where the driving lines (p_i, o_i) meet (IRLS, Cauchy loss).
+
+    Starts at the weighted median of the points; a small ridge toward it keeps the
+    solution defined when all lines are parallel (a single road).
+    """
+    if len(p) == 0:
+        return None
+    c0 = np.array([_wmedian(p[:, 0], w), _wmedian(p[:, 1], w)])
+    n = np.stack([-o[:, 1], o[:, 0]], axis=1)
+    c = c0.copy()
+    for _ in range(iters):
+        r = np.sum(n * (c - p), axis=1)
+        wi = w / (1.0 + (r / scale) ** 2)
+        M = (wi[:, None, None] * n[:, :, None] * n[:, None, :]).sum(0)
+        b = (wi[:, None] * n * np.sum(n * p, axis=1)[:, None]).sum(0)
+        lam = 1e-3 * max(np.trace(M), 1e-9)
+        c_new = np.linalg.solve(M + lam * np.eye(2), b + lam * c0)
+        if np.hypot(*(c_new - c)) < 1e-3:
+            c = c_new
+            break
+        c = c_new
+    return c
+
+
+def _wmedian(x, w):
+    i = np.argsort(x)
+    cw = np.cumsum(w[i])
+    return float(x[i][np.searchsorted(cw, 0.5 * cw[-1])])
+
+
+def initial_arm_angles(p: np.ndarray, o: np.ndarray, w: np.ndarray, center, min_sep: float,
+                       max_arms: int, min_dist: float = 10.0, peak_frac: float = 0.12,
+                       bin_deg: float = 2.0, smooth_deg: float = 4.0) -> list[float]:
+    """Arm angles from a histogram of outward driving directions around ``center``.
+
+    Only lines far enough from the center and roughly radial are used; the direction is
+    flipped to point away from the center, so every lane of an arm votes for the arm's
+    angle regardless of its lateral offset.
+    """
+    if len(p) == 0:
+        return []
+    v = p - np.asarray(center, float)
+    dist = np.hypot(v[:, 0], v[:, 1])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        radial = np.sum(o * v, axis=1) / np.maximum(dist, 1e-9)
+    use = (dist > min_dist) & (np.abs(radial) > math.cos(math.radians(35.0)))
+    if not use.any():
+        return []
+    out = o[use] * np.sign(radial[use])[:, None]
+    ang = np.arctan2(out[:, 1], out[:, 0])
+    nb = int(round(360.0 / bin_deg))
+    idx = np.floor(np.mod(ang, 2 * math.pi) / (2 * math.pi) * nb).astype(int) % nb
+    hist = np.bincount(idx, w[use], nb)
+    k = np.arange(-3 * int(smooth_deg / bin_deg) - 1, 3 * int(smooth_deg / bin_deg) + 2)
+    ker = np.exp(-0.5 * (k * bin_deg / smooth_deg) ** 2)
+    sm = np.zeros(nb)
+    for kk, kv in zip(k, ker):
+        sm += kv * np.roll(hist, kk)
+    peaks = [i for i in range(nb) if sm[i] >= sm[i - 1] and sm[i] > sm[(i + 1) % nb]]
+    peaks.sort(key=lambda i: -sm[i])
+    chosen: list[float] = []
+    top = sm.max()
+    for i in peaks:
+        if sm[i] < peak_frac * top or len(chosen) >= max_arms:
+            break
+        a = float(wrap_angle((i + 0.5) * 2 * math.pi / nb))
+        if all(abs(float(wrap_angle(a - b))) >= min_sep for b in chosen):
+            chosen.append(a)
+    return chosen
+
+
+def initial_lanes(obs: ObservationSet, center, angles, lane_width: float, max_lanes: int,
+                  gap_max: float, traffic_side: int = 1, iters: int = 3, width_range=None):
+    """Refine the center from the arms' median axes and guess gap / lane counts per arm.
+
+    Observations are assigned to the arm whose axis they run along (outside 8 m, roughly
+    parallel when oriented); per arm the median axis lies halfway between the innermost
+    entering and the innermost leaving observations; the center is the least-squares
+    meeting point of these axes; lane counts (and, with ``width_range``, the lane width)
+    follow from the lateral spread. Returns
+    (center, [(gap, lanes_in, lanes_out, width), ...]).
+    """
+    c = np.asarray(center, float).copy()
+    n_arm = len(angles)
+    u = np.array([[math.cos(a), math.sin(a)] for a in angles]).reshape(n_arm, 2)
+    nrm = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    params = [(0.0, 1, 1, lane_width)] * n_arm
+    if len(obs) == 0 or n_arm == 0:
+        return c, params
+    p = obs.xy
+    o = np.stack([obs.hx, obs.hy], axis=1)
+    for _ in range(iters):
+        v = p - c
+        s = v @ u.T
+        t = v @ nrm.T
+        par = np.abs(o @ u.T)
+        ok = (s > 8.0) & (np.abs(t) < 25.0) & (~obs.has_o[:, None] | (par > math.cos(math.radians(20))))
+        cost = np.where(ok, np.abs(t), np.inf)
+        arm = np.argmin(cost, axis=1)
+        has = np.isfinite(cost[np.arange(len(p)), arm])
+        A = np.zeros((2, 2))
+        b = np.zeros(2)
+        params = []
+        for k in range(n_arm):
+            m = has & (arm == k)
+            ent = np.where(obs.has_o[m], (o[m] @ u[k]) < 0, obs.d[m] > 0)
+            tk = t[m, k] * traffic_side
+            wk_ = obs.w[m]
+            ti, to = tk[ent], -tk[~ent]
+            if len(ti) == 0 or len(to) == 0:
+                params.append((0.0, 1, 1, lane_width))
+                continue
+            lo_i, hi_i = _robust_range(ti, wk_[ent])
+            lo_o, hi_o = _robust_range(to, wk_[~ent])
+            axis = 0.5 * (lo_i - lo_o) * traffic_side       # lateral offset of the median axis
+            inner = 0.5 * (lo_i + lo_o)                      # gap/2 + w/2
+            gap = float(np.clip(2.0 * (inner - 0.5 * lane_width), 0.0, gap_max))
+            nin = int(np.clip(round((hi_i - lo_i) / lane_width) + 1, 1, max_lanes))
+            nout = int(np.clip(round((hi_o - lo_o) / lane_width) + 1, 1, max_lanes))
+            wd = lane_width
+            if width_range is not None and nin + nout > 2:
+                wd = ((hi_i - lo_i) + (hi_o - lo_o)) / (nin + nout - 2)
+                wd = float(np.clip(wd, *width_range))
+            gap = float(np.clip(2.0 * (inner - 0.5 * wd), 0.0, gap_max))
+            params.append((gap, nin, nout, wd))
+            wk = float(min(len(ti), len(to)))
+            A += wk * np.outer(nrm[k], nrm[k])
+            b += wk * nrm[k] * (nrm[k] @ c + axis)
+        lam = 1e-3 * max(np.trace(A), 1e-9)
+        c = np.linalg.solve(A + lam * np.eye(2), b + lam * c)
+    return c, params
+
+
+def _robust_range(x: np.ndarray, w: np.ndarray, tail: float = 0.03) -> tuple[float, float]:
+    """Weighted (tail, 1 - tail) quantiles: ignores only light outliers at either end."""
+    i = np.argsort(x)
+    x, cw = x[i], np.cumsum(w[i])
+    lo = int(np.searchsorted(cw, tail * cw[-1], side='right'))
+    hi = int(np.searchsorted(cw, (1.0 - tail) * cw[-1], side='left'))
+    return float(x[min(lo, len(x) - 1)]), float(x[min(hi, len(x) - 1)])
