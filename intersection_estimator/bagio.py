@@ -121,6 +121,19 @@ def typestore():
     return ts
 
 
+@lru_cache(maxsize=256)
+def _is_default(msgtype: str, fmt: str, text: str) -> bool:
+    """The embedded schema is exactly what the default typestore writes (bags by rosbags)."""
+    base = typestore()
+    if fmt not in ('msg', 'ros2msg') or msgtype not in base.types:
+        return False
+    try:
+        return base.generate_msgdef(msgtype, ros_version=2)[0] == text
+    except Exception:
+        return False
+
+
+@lru_cache(maxsize=256)
 def _parse_schema(msgtype: str, fmt: str, text: str) -> dict:
     from rosbags.typesys import get_types_from_idl, get_types_from_msg
     if fmt in ('msg', 'ros2msg'):
@@ -141,7 +154,7 @@ def _bag_typestore(schemas: Iterable[tuple[str, str, str]]):
     base = typestore()
     typs = {}
     for msgtype, fmt, text in schemas:
-        if not text or msgtype in typs:
+        if not text or msgtype in typs or _is_default(msgtype, fmt, text):
             continue
         try:
             parsed = _parse_schema(msgtype, fmt, text)

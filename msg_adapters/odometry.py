@@ -22,7 +22,7 @@ from ._common import header_of, norm_frame, quat_from_yaw, yaw_from_quat
 from .errors import AdapterError, guarded
 from .types import make_header
 
-__all__ = ['EgoPose', 'EgoPoseBuffer', 'read_odometry', 'odometry_msg']
+__all__ = ['EgoPose', 'EgoPoseBuffer', 'read_odometry', 'read_tf_static', 'apply', 'odometry_msg']
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,22 @@ def read_odometry(msg) -> EgoPose:
     if not all(math.isfinite(v) for v in (pose.x, pose.y, pose.yaw)):
         raise AdapterError('non_finite', f'ego pose ({pose.x}, {pose.y}, {pose.yaw})')
     return pose
+
+
+@guarded
+def read_tf_static(msg, base_frame: str = 'base_link') -> dict[str, tuple[float, float, float]]:
+    """Mounts ``{child: (x, y, yaw)}`` of the transforms from ``base_frame`` in a
+    ``tf2_msgs/TFMessage`` (e.g. ``/tf_static``): what :meth:`EgoPoseBuffer.transform` takes."""
+    out = {}
+    for tf in msg.transforms:
+        if norm_frame(tf.header.frame_id) != norm_frame(base_frame):
+            continue
+        tr, q = tf.transform.translation, tf.transform.rotation
+        yaw = float(yaw_from_quat(q.x, q.y, q.z, q.w))
+        mount = (float(tr.x), float(tr.y), yaw)
+        if all(math.isfinite(v) for v in mount):
+            out[norm_frame(tf.child_frame_id)] = mount
+    return out
 
 
 def _wrap(a: float) -> float:

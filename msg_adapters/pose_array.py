@@ -6,11 +6,12 @@ heading" (NaN).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ._common import header_of, quat_from_yaw, yaw_from_quat
+from ._common import header_of, yaw_from_quat
 from .errors import AdapterError, guarded
 
 __all__ = ['PoseList', 'read_pose_array', 'pose_array_msg']
@@ -47,8 +48,9 @@ def read_pose_array(msg, *, max_points: int | None = None) -> PoseList:
 
 def pose_msg(types, x, y, yaw, z=0.0):
     """``geometry_msgs/Pose`` at (x, y, z) with yaw (NaN -> zero quaternion)."""
-    if np.isfinite(yaw):
-        qx, qy, qz, qw = (float(v) for v in quat_from_yaw(yaw))
+    yaw = float(yaw)
+    if math.isfinite(yaw):
+        qx, qy, qz, qw = 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
     else:
         qx = qy = qz = qw = 0.0
     return types.get('geometry_msgs/msg/Pose')(
