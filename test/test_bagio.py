@@ -244,3 +244,37 @@ def test_typestore_has_all_families():
     shape = [f for f, _ in ts.fielddefs['autoware_perception_msgs/msg/Shape'][1]]
     assert shape == ['type', 'footprint', 'dimensions']
     assert math.isclose(BAG_T0, 1.7e9)
+
+
+def test_output_bag_latched_markers_readable_by_mcap(scenario, tmp_path):
+    from mcap.reader import make_reader
+    from msg_adapters.lanelets import lanelets_msg
+    from msg_adapters.markers import markers_msg
+    from msg_adapters.topology import read_topology, topology_msg
+    with BagWriter(tmp_path / 'out') as w:
+        T = w.types
+        h = make_header(T, 'map', 3.0)
+        w.write('/intersection_estimator/topology', topology_msg(T, h, scenario.gt, 10, -1.0, 5, 1), 3.0)
+        w.write('/intersection_estimator/lanelets', lanelets_msg(T, h, scenario.gt_lanelets, 7), 3.0)
+        w.write('/intersection_estimator/markers', markers_msg(T, h, scenario.gt, scenario.gt_lanelets)[0], 3.0)
+    meta = (tmp_path / 'out' / 'metadata.yaml').read_text()
+    assert meta.count('transient_local') == 1
+    with open_bags(tmp_path / 'out') as bags:
+        msgs = {m.topic: m.msg for m in bags.messages()}
+    assert read_topology(msgs['/intersection_estimator/topology']).state == 'CONVERGING'
+    with (tmp_path / 'out' / 'out.mcap').open('rb') as f:
+        reader = make_reader(f)
+        assert reader.get_summary().statistics.message_count == 3
+        schemas = {s.name for s in reader.get_summary().schemas.values()}
+    assert 'visualization_msgs/msg/MarkerArray' in schemas
+
+
+def test_core_and_adapters_do_not_import_rclpy():
+    import pathlib
+    import subprocess
+    import sys
+    code = ('import sys, intersection_estimator.bagio, msg_adapters.detections, msg_adapters.markers, '
+            'msg_adapters.topology, msg_adapters.lanelets, msg_adapters.radar_scan; '
+            'intersection_estimator.bagio.typestore(); '
+            'assert "rclpy" not in sys.modules, "rclpy imported"')
+    subprocess.run([sys.executable, '-c', code], check=True, cwd=str(pathlib.Path(__file__).parents[1]))
