@@ -150,7 +150,7 @@ def resample(polyline: np.ndarray, step: float = RESAMPLE_M) -> np.ndarray:
     return np.stack([np.interp(q, s, polyline[:, 0]), np.interp(q, s, polyline[:, 1])], axis=1)
 
 
-def simplify(polyline: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+def simplify(polyline: np.ndarray, tol: float = 1e-4) -> np.ndarray:
     """A polyline whose vertices all lie within ``tol`` of its chord -> its two ends
     (straight lanes become one segment; keeps the distance computation cheap)."""
     if len(polyline) <= 2:

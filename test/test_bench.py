@@ -70,8 +70,12 @@ def _shifted_gt_estimator(calls, shift=0.2, fail_seed=None):
 def test_estimator_is_called_and_scored(monkeypatch):
     calls = []
     monkeypatch.setattr(bench, '_load_estimator', lambda: _shifted_gt_estimator(calls))
-    res = run_bench(BenchOptions(n=3, mode='raw', samples=123, lane_samples=456, seed=10))
-    assert [c[1:] for c in calls] == [('raw', 123, 456, s) for s in (10, 11, 12)]
+    bench._WARM.clear()
+    res = run_bench(BenchOptions(n=3, mode='raw', samples=1234, lane_samples=456, seed=10))
+    # one small untimed warm-up run per process, then one call per case
+    assert calls[0][1:] == ('raw', 200, 200, 10)
+    calls = calls[1:]
+    assert [c[1:] for c in calls] == [('raw', 1234, 456, s) for s in (10, 11, 12)]
     assert all(c[0] == len(simulate_scenario(s).detections('raw')) for c, s in zip(calls, (10, 11, 12)))
     s = res['summary']
     assert s['topology_accuracy'] == 1.0 and s['lane_recall'] == 1.0
@@ -86,7 +90,8 @@ def test_estimator_is_called_and_scored(monkeypatch):
 def test_estimator_errors_become_failed_cases(monkeypatch):
     calls = []
     est = _shifted_gt_estimator(calls, fail_seed=1)
-    res = run_bench(BenchOptions(n=3, seed=0), estimator=est)
+    res = run_bench(BenchOptions(n=3, seed=0, warmup=False), estimator=est)
+    assert len(calls) == 3
     bad = res['cases'][1]['metrics']
     assert not bad['ok'] and 'chain diverged' in bad['reason'] and res['cases'][1]['estimate'] is None
     assert res['summary']['n_failed'] == 1

@@ -248,3 +248,25 @@ def test_kerb_lane_turns_to_kerb_side():
         assert {k for _, k, b, _ in mine if b == right} == {2}   # kerb lane
         assert {k for _, k, b, _ in mine if b == left} == {0}    # median lane
         assert {k for _, k, _, _ in mine} == {0, 1, 2}
+
+
+def test_simulate_cli_writes_gt_and_bag(tmp_path, capsys):
+    import argparse
+    import json
+    from intersection_estimator.sim.cli import register
+    ap = argparse.ArgumentParser()
+    register(ap.add_subparsers())
+    args = ap.parse_args(['simulate', '--seed', '4', '--out', str(tmp_path / 's'),
+                          '--mode', 'tracked', '--traffic-side', 'left'])
+    assert args.func(args) == 0
+    gt = json.loads((tmp_path / 's' / 'gt.json').read_text())
+    assert gt['seed'] == 4 and gt['traffic_side'] == -1 and gt['sim_config']['traffic_side'] == -1
+    sc = simulate_scenario(4, SimConfig(traffic_side=-1))
+    assert len(gt['lanes']) == len(sc.gt_lanelets)
+    assert {x['id']: x['traffic'] for x in gt['lanes']} == sc.traffic
+    try:
+        import intersection_estimator.bagio  # noqa: F401
+    except ImportError:
+        assert 'bag not written' in capsys.readouterr().err
+    else:
+        assert (tmp_path / 's' / 'bag').is_dir()

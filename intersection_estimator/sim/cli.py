@@ -28,7 +28,7 @@ def run_simulate(seed: int, out, sensors=MODES, config: SimConfig = SimConfig())
         res['bag_note'] = f'bag not written: intersection_estimator.bagio unavailable ({e})'
         return res
     res['bag'] = out / 'bag'
-    bagio.write_scenario_bag(sc, res['bag'])
+    bagio.write_scenario_bag(sc, res['bag'], sensors=tuple(sensors))
     return res
 
 
