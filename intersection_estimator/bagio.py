@@ -32,7 +32,8 @@ import numpy as np
 
 __all__ = ['BagError', 'BagMessage', 'BagSet', 'BagWriter', 'TopicInfo', 'typestore',
            'open_bags', 'detect_topics', 'write_scenario_bag', 'SCENARIO_TOPICS',
-           'SCENARIO_FRAMES', 'BAG_T0', 'LATCHED', 'ROLE_TYPES']
+           'SCENARIO_FRAMES', 'SCENARIO_RADAR_MOUNT', 'BAG_T0', 'LATCHED', 'ROLE_TYPES',
+           'ScenarioBagInfo']
 
 # ----------------------------------------------------------------------------- constants
 
@@ -47,6 +48,9 @@ SCENARIO_TOPICS = {
 }
 #: Frames of scenario bags: fixed frame, ego frame, radar frame (mounted on the ego).
 SCENARIO_FRAMES = {'fixed': 'map', 'base': 'base_link', 'radar': 'radar'}
+#: Radar mount (x, y, yaw) in base_link of scenario bags with the default SimConfig
+#: (``sensor_mount`` = 3.7 m ahead); also written to ``/tf_static`` (base_link -> radar).
+SCENARIO_RADAR_MOUNT = (3.7, 0.0, 0.0)
 #: Bag time of the scenario's t = 0 [s] (2023-11-14T22:13:20Z): avoids zero stamps.
 BAG_T0 = 1_700_000_000.0
 
@@ -691,7 +695,7 @@ def _mount_of(scenario) -> tuple[float, float, float]:
         off = d.sensor_xy[ok] - ego.xy[i]
         c, s = np.cos(ego.yaw[i]), np.sin(ego.yaw[i])
         local = np.stack([c * off[:, 0] + s * off[:, 1], -s * off[:, 0] + c * off[:, 1]], axis=1)
-        mx, my = np.median(local, axis=0)
+        mx, my = np.round(np.median(local, axis=0), 9) + 0.0
         return float(mx), float(my), 0.0
     return float(getattr(scenario.config, 'sensor_mount', 0.0)), 0.0, 0.0
 

@@ -55,7 +55,7 @@ def test_scenario_bag_round_trip(scenario, scenario_bag):
     path, info = scenario_bag
     got, mounts = read_back(path)
     assert mounts == {'radar': pytest.approx(info.mount)}
-    assert info.mount == pytest.approx((scenario.config.sensor_mount, 0.0, 0.0), abs=1e-9)
+    assert info.mount == (scenario.config.sensor_mount, 0.0, 0.0) == bagio.SCENARIO_RADAR_MOUNT
     assert set(got) == set(MODE_OF)
     for topic, mode in MODE_OF.items():
         d, ref = got[topic], scenario.detections(mode)
