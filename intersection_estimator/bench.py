@@ -93,7 +93,7 @@ def _run_estimator(estimator, sc, opts: BenchOptions):
         raise ValueError('estimator returned no intersection')
     stats = {'topology_samples': opts.samples, 'lane_samples': opts.lane_samples,
              'elapsed_s': timing['total'] / 1e3}
-    return estimate_to_dict(res.intersection, list(res.lanelets or []), stats), timing
+    return estimate_to_dict(res.intersection, list(res.lanelets or []), stats, arrays=True), timing
 
 
 _WARM: set = set()
@@ -118,7 +118,7 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
     seed = opts.seed + i
     t0 = time.perf_counter()
     sc = simulate_scenario(seed, SimConfig())
-    gt = gt_to_dict(sc)
+    gt = gt_to_dict(sc, arrays=True)
     sim_ms = 1e3 * (time.perf_counter() - t0)
     tb = None
     if opts.oracle:

@@ -46,11 +46,22 @@ def dumps(obj) -> str:
     return json.dumps(_clean(obj), sort_keys=True, indent=1, allow_nan=False) + '\n'
 
 
-def estimate_to_dict(intersection: Intersection, lanelets, stats: dict | None = None) -> dict:
-    """The estimate.json document as a dict (not yet rounded)."""
+def _lane_arrays(ll: Lanelet) -> dict:
+    """``Lanelet.to_json`` keys with the polylines left as float arrays (fast, in-memory)."""
+    return {'id': ll.id, 'kind': ll.kind, 'arm': int(ll.arm), 'arm_to': int(ll.arm_to),
+            'lane_index': int(ll.lane_index), 'center_line': np.asarray(ll.center, float),
+            'left': np.asarray(ll.left, float), 'right': np.asarray(ll.right, float),
+            'successors': list(ll.successors), 'confidence': float(ll.confidence)}
+
+
+def estimate_to_dict(intersection: Intersection, lanelets, stats: dict | None = None, *,
+                     arrays: bool = False) -> dict:
+    """The estimate.json document as a dict (not yet rounded). ``arrays=True`` keeps the
+    polylines as numpy arrays (for in-memory evaluation; :func:`dumps` still serialises it)."""
     d = intersection.to_json()
     d['traffic_side'] = int(intersection.traffic_side)
-    d['lanes'] = [ll.to_json() for ll in sorted(lanelets or [], key=lambda ll: ll.id)]
+    lane = _lane_arrays if arrays else Lanelet.to_json
+    d['lanes'] = [lane(ll) for ll in sorted(lanelets or [], key=lambda ll: ll.id)]
     d['stats'] = dict(stats or {})
     return d
 
@@ -84,10 +95,12 @@ class GroundTruth:
     raw: dict
 
 
-def gt_to_dict(scenario) -> dict:
-    """gt.json of a :class:`intersection_estimator.sim.Scenario`."""
+def gt_to_dict(scenario, *, arrays: bool = False) -> dict:
+    """gt.json of a :class:`intersection_estimator.sim.Scenario` (``arrays``: see
+    :func:`estimate_to_dict`)."""
     d = estimate_to_dict(scenario.gt, scenario.gt_lanelets,
-                         {'tracks': len(scenario.tracks), 'duration_s': scenario.duration})
+                         {'tracks': len(scenario.tracks), 'duration_s': scenario.duration},
+                         arrays=arrays)
     for lane in d['lanes']:
         lane['traffic'] = int(scenario.traffic.get(lane['id'], 0))
     for arm, stop in zip(d['arms'], scenario.stop):

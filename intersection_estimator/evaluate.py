@@ -92,10 +92,10 @@ def _as_dict(x) -> dict:
         return x
     if hasattr(x, 'gt_lanelets'):
         from .estimate_io import gt_to_dict
-        return gt_to_dict(x)
+        return gt_to_dict(x, arrays=True)
     if isinstance(x, (tuple, list)) and len(x) in (2, 3):
         from .estimate_io import estimate_to_dict
-        return estimate_to_dict(*x)
+        return estimate_to_dict(*x, arrays=True)
     raise Malformed(f'expected an estimate.json object, got {type(x).__name__}')
 
 

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ..model import wrap_angle
 from ..observations import Detections
 from .config import MODES, SimConfig
 
@@ -67,7 +68,7 @@ def _tracked(rng, truth, sens, center, cfg, n_cyc):
     hn = math.radians(cfg.heading_noise_deg)
     n = len(cyc)
     det = dict(cyc=cyc, xy=xy + rng.normal(0, cfg.position_noise, (n, 2)),
-               heading=yaw + rng.normal(0, hn, n),
+               heading=wrap_angle(yaw + rng.normal(0, hn, n)),
                speed=np.maximum(sp + rng.normal(0, cfg.speed_noise, n), 0.0),
                track_id=vid, label=np.full(n, CAR))
     n_false = int(rng.poisson(cfg.false_tracks_per_s * n_cyc / cfg.rate_hz))
@@ -80,7 +81,7 @@ def _tracked(rng, truth, sens, center, cfg, n_cyc):
     fc = start[j] + (np.arange(len(j)) - np.repeat(np.cumsum(life) - life, life))
     m = len(j)
     false = dict(cyc=fc, xy=pos[j] + rng.normal(0, cfg.position_noise, (m, 2)),
-                 heading=hdg[j] + rng.normal(0, hn, m), speed=fsp[j],
+                 heading=wrap_angle(hdg[j] + rng.normal(0, hn, m)), speed=fsp[j],
                  track_id=FALSE_TRACK_ID0 + j, label=np.zeros(m, int))
     return [det, false]
 
@@ -111,7 +112,7 @@ def _heading(rng, truth, sens, center, cfg, n_cyc):
     n = len(cyc)
     hn = math.radians(cfg.heading_noise_deg)
     det = dict(cyc=cyc, xy=xy + rng.normal(0, cfg.position_noise, (n, 2)),
-               heading=yaw + rng.normal(0, hn, n), label=np.full(n, CAR))
+               heading=wrap_angle(yaw + rng.normal(0, hn, n)), label=np.full(n, CAR))
     n_f = int(rng.poisson(cfg.false_heading_per_cycle * n_cyc))
     false = dict(cyc=rng.integers(0, n_cyc, n_f), xy=_disk(rng, n_f, center, cfg.clutter_radius),
                  heading=rng.uniform(-math.pi, math.pi, n_f), label=np.zeros(n_f, int))

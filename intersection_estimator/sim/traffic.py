@@ -97,14 +97,21 @@ def _path(route, by_id) -> np.ndarray:
     return np.concatenate(parts)
 
 
+def _limit_rate(w: np.ndarray, budget: np.ndarray) -> np.ndarray:
+    """``w[i] = min(w[i], w[i-1] + budget[i-1])`` in closed form: with ``B = cumsum(budget)``,
+    ``w[i] = B[i] + min_{j <= i}(w[j] - B[j])``."""
+    b = np.concatenate([[0.0], np.cumsum(budget)])
+    return b + np.minimum.accumulate(w - b)
+
+
 def _speed_profile(s: np.ndarray, kappa: np.ndarray, v_cruise: float, cfg: SimConfig):
+    """Cruise speed, ``v^2 |kappa| <= max_lat_acc`` in turns, limited acceleration and
+    deceleration (forward / backward pass on ``v^2``)."""
     v = np.minimum(v_cruise, np.sqrt(cfg.max_lat_acc / np.maximum(np.abs(kappa), 1e-6)))
     ds = np.diff(s)
-    for i in range(1, len(v)):           # acceleration limit
-        v[i] = min(v[i], np.sqrt(v[i - 1] ** 2 + 2 * cfg.max_acc * ds[i - 1]))
-    for i in range(len(v) - 2, -1, -1):  # deceleration limit
-        v[i] = min(v[i], np.sqrt(v[i + 1] ** 2 + 2 * cfg.max_dec * ds[i]))
-    return v
+    w = _limit_rate(v ** 2, 2 * cfg.max_acc * ds)
+    w = _limit_rate(w[::-1], 2 * cfg.max_dec * ds[::-1])[::-1]
+    return np.sqrt(w)
 
 
 def _kinematics(path: np.ndarray):
