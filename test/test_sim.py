@@ -164,6 +164,11 @@ def test_tracked_detections():
     real = d.track_id < FALSE_TRACK_ID0
     assert real.sum() > 500 and (~real).sum() > 0
     assert np.isfinite(d.heading).all() and np.isnan(d.doppler).all()
+    assert d.heading.min() >= -math.pi and d.heading.max() < math.pi
+    # persistent ids: one id per simulated vehicle, stamps strictly increasing per id
+    assert set(d.track_id[real]) <= {tr.id for tr in sc.tracks}
+    for tid in np.unique(d.track_id)[:10]:
+        assert np.all(np.diff(d.t[d.track_id == tid]) > 0)
     # noise N(0, 1 m) around the true positions
     truth = {(tr.id, round(t * 10)): xy for tr in sc.tracks for t, xy in zip(tr.t, tr.xy)}
     err = np.array([d.xy[i] - truth[(d.track_id[i], round(d.t[i] * 10))]
