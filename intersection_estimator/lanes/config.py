@@ -11,11 +11,22 @@ _RANGES = {
     'station_spacing': (0.5, 20.0, 'distance between border support points [m]'),
     'connector_spacing': (0.2, 20.0, 'distance between connector support points [m]'),
     'connector_min_stations': (3, 1000, 'fewest support points of a connector'),
-    'connector_hermite': (0, 1, '1: connectors start as cubic Hermite curves tangent to their lanes, '
-                          '0: straight (paper)'),
+    'connector_hermite': (0, 1, '1: connectors start as arc-like cubic Bezier curves tangent to '
+                          'their lanes, 0: straight (paper)'),
+    'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
+    'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
+    'stop_step': (0.01, 5.0, 'grid step of the stop-distance search [m]'),
+    'refit_lanes': (0, 10, 'rounds of re-fitting arm directions and lane positions to the traffic '
+                    'and re-assigning the trajectory parts'),
+    'min_fit_points': (2, 10**6, 'fewest points to re-fit an arm direction'),
+    'max_refit_angle_deg': (0.0, 90.0, 'largest accepted change of an arm direction [deg]'),
+    'lane_prior_points': (0.0, 1e6, 'pseudo points of the topology lane position in the re-fit'),
     'arm_length_min': (5.0, 500.0, 'shortest entering/leaving lanelet [m]'),
     'arm_length_max': (5.0, 500.0, 'longest entering/leaving lanelet [m]'),
     'stop_margin': (0.0, 20.0, 'extra distance of the stop line beyond the corner of two arms [m]'),
+    'kerb_radius': (0.0, 50.0, 'radius of the rounded kerb between two arms [m]'),
+    'assign_inside': (0.0, 50.0, 'part points this far inside the stop line still count [m]'),
+    'min_part_length': (0.0, 200.0, 'shortest extent along its arm of a trajectory part [m]'),
     'stop_min': (0.0, 100.0, 'smallest stop-line distance from the center [m]'),
     'stop_max': (0.0, 200.0, 'largest stop-line distance from the center [m]'),
     'min_part_points': (1, 1000, 'fewest points of a trajectory part that gets a lane'),
@@ -58,9 +69,19 @@ class LaneConfig:
     connector_spacing: float = 1.0
     connector_min_stations: int = 6
     connector_hermite: int = 1
+    stop_fit: int = 1
+    stop_search: float = 2.0
+    stop_step: float = 0.25
+    refit_lanes: int = 1
+    min_fit_points: int = 20
+    max_refit_angle_deg: float = 10.0
+    lane_prior_points: float = 10.0
     arm_length_min: float = 20.0
     arm_length_max: float = 120.0
-    stop_margin: float = 1.0
+    stop_margin: float = 2.5
+    kerb_radius: float = 5.0
+    assign_inside: float = 0.0
+    min_part_length: float = 5.0
     stop_min: float = 3.0
     stop_max: float = 40.0
     min_part_points: int = 3

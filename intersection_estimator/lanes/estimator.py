@@ -9,12 +9,13 @@ import numpy as np
 from ..model import Intersection, Lanelet
 from ..observations import Detections
 from .config import LaneConfig
-from .init import assign_parts, lane_specs, trajectories
+from .init import arm_frames, assign_parts, fit_frames, lane_specs, stop_distances, trajectories
 from .likelihood import all_terms, assign_points, station_csr
 from .mcmc import run_chain
 from .model import LaneGraph, build_graph
 from .prior import all_angles, angle_csr, log_prior
 from .refine import refine_offsets
+from .stops import fit_stops
 
 __all__ = ['LaneCourseEstimator', 'lanelets_from_topology']
 
@@ -112,8 +113,17 @@ class LaneCourseEstimator:
         cfg = self.config
         t0 = time.perf_counter()
         trajs = trajectories(dets)
-        assign_parts(trajs, topology, cfg)
-        specs, pairs, _ = lane_specs(topology, trajs, cfg)
+        stops = stop_distances(topology, cfg)
+        assign_parts(trajs, topology, cfg, stops)
+        frames = arm_frames(topology)
+        for _ in range(cfg.refit_lanes):
+            frames = fit_frames(topology, trajs, stops, cfg)
+            assign_parts(trajs, topology, cfg, stops, frames)
+        if cfg.stop_fit:
+            stops = fit_stops(topology, frames, trajs, stops, cfg.stop_search, cfg.stop_step,
+                              float(stops.max(initial=0.0)) + 20.0)
+        self.stops = stops
+        specs, pairs, _ = lane_specs(topology, trajs, cfg, stops=stops, frames=frames)
         key = (_topology_key(topology), tuple(s.id for s in specs))
         self._trajs = trajs
         if self.graph is not None and key == self._key:

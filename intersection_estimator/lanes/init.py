@@ -9,10 +9,12 @@
    leaving lanes that a trajectory connects gets a straight connector lanelet.
 
 Stop distance (where lanes end at the intersection): the road edges of two adjacent
-arms ``a``, ``b`` (half widths ``h_a``, ``h_b`` on the facing sides, angle ``D`` between
-them) meet at the distance ``s_a = (h_b + h_a cos D) / sin D`` along ``a``; the stop
-line of ``a`` is the larger of its two corners plus ``stop_margin``, clipped to
-``[stop_min, stop_max]``. Neighbours more than 135 deg away do not constrain it.
+arms ``a``, ``b`` (half widths ``h_a``, ``h_b``, angle ``D`` between them) meet at
+``(h_b + h_a cos D) / sin D`` along ``a``; a kerb of radius ``kerb_radius`` rounding
+that corner needs ``kerb_radius * tan((pi - D) / 2)`` more. The stop line of ``a`` is
+the larger of its two corners (at least its own half width) plus ``stop_margin``,
+clipped to ``[stop_min, stop_max]``; neighbours 160 deg or more away do not constrain
+it. Lanelets of both directions of an arm end/start at that distance.
 """
 
 from __future__ import annotations
@@ -61,65 +63,79 @@ def split_at_center(xy: np.ndarray, center: np.ndarray) -> int:
     return int(np.argmin(np.sum((xy - center) ** 2, axis=1)))
 
 
-def _facing_half_width(arm, side: int, traffic_side: int) -> float:
-    """Half width of ``arm`` on its ``side`` (+1 = +n) side."""
-    n_in_side = arm.lanes_in if side * traffic_side > 0 else arm.lanes_out
-    return 0.5 * arm.gap + n_in_side * arm.lane_width
+def _corner(hw_i: float, hw_j: float, theta: float, kerb: float) -> float:
+    """Distance along arm i to clear neighbour j at angle ``theta`` with a kerb radius."""
+    if theta >= math.radians(160.0) or theta < 1e-3:
+        return 0.0
+    corner = (hw_j + hw_i * math.cos(theta)) / math.sin(theta)
+    return max(0.0, corner + kerb * math.tan(0.5 * (math.pi - theta)))
 
 
 def stop_distances(topo: Intersection, cfg: LaneConfig) -> np.ndarray:
     """Stop-line distance from the center per arm (module docstring)."""
-    arms, ts = topo.arms, topo.traffic_side
-    out = np.full(len(arms), cfg.stop_min)
-    for i, a in enumerate(arms):
-        s = 0.0
-        for j, b in enumerate(arms):
-            if j == i:
-                continue
-            d = (b.angle - a.angle) % (2 * math.pi)       # ccw angle from a to b
-            side = 1 if d < math.pi else -1                # b on a's +n or -n side
-            D = d if side > 0 else 2 * math.pi - d
-            if D > math.radians(135) or D < 1e-3:
-                continue
-            h_a = _facing_half_width(a, side, ts)
-            h_b = _facing_half_width(b, -side, ts)
-            s = max(s, (h_b + h_a * math.cos(D)) / math.sin(D))
+    arms = topo.arms
+    n = len(arms)
+    out = np.full(n, cfg.stop_min)
+    if n == 0:
+        return out
+    hw = np.array([a.half_width() for a in arms])
+    ang = np.array([a.angle for a in arms])
+    for i in range(n):
+        s = hw[i]
+        if n > 1:
+            nxt, prv = (i + 1) % n, (i - 1) % n
+            s = max(s, _corner(hw[i], hw[nxt], float((ang[nxt] - ang[i]) % (2 * math.pi)),
+                               cfg.kerb_radius),
+                    _corner(hw[i], hw[prv], float((ang[i] - ang[prv]) % (2 * math.pi)),
+                            cfg.kerb_radius))
         out[i] = min(max(s + cfg.stop_margin, cfg.stop_min), cfg.stop_max)
     return out
 
 
-def _lane_rays(topo: Intersection):
-    """(arm, k, direction, origin, u, n, offset) of every topology lane."""
-    for ai, a in enumerate(topo.arms):
-        for d in (ENTERING, LEAVING):
-            for k, off in enumerate(a.lane_offsets(d, topo.traffic_side)):
-                yield ai, k, d, a.direction, a.normal, float(off)
+def _lane_rays(topo: Intersection, frames=None):
+    """(arm, k, direction, origin, u, n, lateral position) of every topology lane."""
+    frames = arm_frames(topo) if frames is None else frames
+    for ai, f in enumerate(frames):
+        for (d, k), lat in sorted(f.lat.items()):
+            yield ai, k, d, f.origin, f.u, f.n, lat
 
 
-def _ray_distance(p: np.ndarray, c: np.ndarray, u, n, off: float) -> float:
-    s = float((p - c) @ u)
-    lat = float((p - c) @ n) - off
-    return abs(lat) if s >= 0 else math.hypot(s, lat)
+def assign_parts(trajs: list[Trajectory], topo: Intersection, cfg: LaneConfig,
+                 stops: np.ndarray | None = None, frames=None) -> None:
+    """Split every trajectory and assign its parts to lanes (paper §III-A).
 
-
-def assign_parts(trajs: list[Trajectory], topo: Intersection, cfg: LaneConfig) -> None:
-    """Split every trajectory and assign its parts to lanes (paper §III-A)."""
+    A part goes to the lane of its direction whose ray is closest to the mean of the
+    part's points beyond that arm's stop line (the paper takes the mean of the whole
+    part; points inside the intersection belong to the turn and would bias it). The
+    part must head the lane's way and have ``min_part_points`` points there spanning
+    at least ``min_part_length`` metres.
+    """
     c = topo.center
-    rays = list(_lane_rays(topo))
+    if stops is None:
+        stops = stop_distances(topo, cfg)
+    rays = list(_lane_rays(topo, frames))
     for tr in trajs:
+        tr.lane_in = tr.lane_out = None
         if len(tr.xy) < 2 or not rays:
             continue
         tr.split = split_at_center(tr.xy, c)
         for d, part in ((ENTERING, tr.xy[:tr.split + 1]), (LEAVING, tr.xy[tr.split:])):
-            if len(part) < cfg.min_part_points or len(part) < 2:
+            if len(part) < max(2, cfg.min_part_points):
                 continue
-            m = part.mean(axis=0)
-            heading = part[-1] - part[0]
             best, lane = cfg.assign_gate, None
-            for ai, k, dd, u, n, off in rays:
-                if dd != d or heading @ (-u if d == ENTERING else u) <= 0:
+            for ai, k, dd, o, u, n, off in rays:
+                if dd != d:
                     continue
-                dist = _ray_distance(m, c, u, n, off)
+                rel = part - o
+                s = rel @ u
+                sel = s > stops[ai] - cfg.assign_inside
+                if sel.sum() < cfg.min_part_points:
+                    continue
+                ss = s[sel]
+                heading = (ss[-1] - ss[0]) * (-1.0 if d == ENTERING else 1.0)
+                if heading < cfg.min_part_length:
+                    continue
+                dist = abs(float(np.mean(rel[sel] @ n)) - off)
                 if dist < best:
                     best, lane = dist, (ai, k)
             if d == ENTERING:
@@ -136,71 +152,163 @@ def connector_id(a: int, k: int, b: int, j: int) -> str:
     return f'c{a}_{k}-{b}_{j}'
 
 
-def _extent(trajs, topo, ai, d, stop, cfg, length):
+@dataclass
+class ArmFrame:
+    """Straight lanes of one arm: ``origin + s * u + lat * n`` (``n`` left of ``u``).
+
+    ``lat[(direction, k)]`` is the lateral position of lane ``k``'s center line."""
+
+    origin: np.ndarray
+    u: np.ndarray
+    n: np.ndarray
+    lat: dict
+    width: float
+
+    def point(self, s, lat):
+        return self.origin + np.multiply.outer(s, self.u) + np.multiply.outer(lat, self.n)
+
+
+def arm_frames(topo: Intersection) -> list[ArmFrame]:
+    """Frames exactly as the topology model has them (paper §II-B)."""
+    out = []
+    for a in topo.arms:
+        lat = {(d, k): float(o) for d in (ENTERING, LEAVING)
+               for k, o in enumerate(a.lane_offsets(d, topo.traffic_side))}
+        out.append(ArmFrame(topo.center.copy(), a.direction, a.normal, lat, a.lane_width))
+    return out
+
+
+def _part_points(tr: Trajectory, d: int) -> np.ndarray:
+    return tr.xy[:tr.split + 1] if d == ENTERING else tr.xy[tr.split:]
+
+
+def fit_frames(topo: Intersection, trajs: list[Trajectory], stops: np.ndarray,
+               cfg: LaneConfig) -> list[ArmFrame]:
+    """Re-fit each arm's direction and lane positions to its assigned trajectory parts.
+
+    The topology step treats lanes as rays with one width per arm; its angle and
+    center errors shift the lanes sideways. Per arm we take the principal direction
+    of the pooled part points (each lane's mean removed) beyond the stop line, and per
+    lane the mean lateral position, shrunk towards the topology's lane position moved
+    by the arm's mean shift (``lane_prior_points`` pseudo points).
+    """
+    frames = arm_frames(topo)
+    groups: dict = {}
+    for tr in trajs:
+        for d, lane in ((ENTERING, tr.lane_in), (LEAVING, tr.lane_out)):
+            if lane is None:
+                continue
+            a, k = lane
+            P = _part_points(tr, d)
+            P = P[(P - topo.center) @ frames[a].u > stops[a]]
+            if len(P):
+                groups.setdefault(a, {}).setdefault((d, k), []).append(P)
+    for a, lanes in groups.items():
+        f = frames[a]
+        pts = {key: np.concatenate(v) for key, v in lanes.items()}
+        centred = np.concatenate([P - P.mean(0) for P in pts.values()])
+        if len(centred) >= cfg.min_fit_points:
+            w, V = np.linalg.eigh(centred.T @ centred)
+            u = V[:, 1] * np.sign(V[:, 1] @ f.u)
+            if u @ f.u > math.cos(math.radians(cfg.max_refit_angle_deg)):
+                f.u, f.n = u, np.array([-u[1], u[0]])
+        obs = {key: float(np.mean((P - f.origin) @ f.n)) for key, P in pts.items()}
+        cnt = {key: len(P) for key, P in pts.items()}
+        tot = sum(cnt.values())
+        shift = sum(cnt[k] * (obs[k] - f.lat[k]) for k in obs) / tot if tot else 0.0
+        n0 = cfg.lane_prior_points
+        for key in f.lat:
+            prior = f.lat[key] + shift
+            if key in obs:
+                f.lat[key] = (cnt[key] * obs[key] + n0 * prior) / (cnt[key] + n0)
+            else:
+                f.lat[key] = prior
+    return frames
+
+
+def _extent(trajs, frame: ArmFrame, ai, d, stop, cfg, length):
     """Lanelet length of arm ``ai`` direction ``d``: covers its trajectory points."""
     if length is not None:
         return float(length)
-    u = topo.arms[ai].direction
-    s = [((tr.xy[:tr.split + 1] if d == ENTERING else tr.xy[tr.split:]) - topo.center) @ u
+    s = [(_part_points(tr, d) - frame.origin) @ frame.u
          for tr in trajs if (tr.lane_in if d == ENTERING else tr.lane_out) is not None
          and (tr.lane_in if d == ENTERING else tr.lane_out)[0] == ai]
     far = max((float(np.max(x)) for x in s if len(x)), default=stop + cfg.arm_length_min)
     return float(np.clip(far - stop, cfg.arm_length_min, cfg.arm_length_max))
 
 
-def _straight_lanes(topo, stops, trajs, cfg, length):
+def _border_positions(lat: list[float], width: float) -> np.ndarray:
+    """Lateral positions of the K+1 borders of K lanes ordered from the median out."""
+    lat = np.asarray(lat, float)
+    side = 1.0 if lat[-1] >= lat[0] else -1.0
+    if len(lat) == 1:
+        side = 1.0 if lat[0] >= 0 else -1.0
+    b = np.empty(len(lat) + 1)
+    b[0] = lat[0] - side * 0.5 * width
+    b[-1] = lat[-1] + side * 0.5 * width
+    b[1:-1] = 0.5 * (lat[:-1] + lat[1:])
+    return b
+
+
+def _straight_lanes(topo, frames, stops, trajs, cfg, length):
     """Entering/leaving specs and the interior neighbour pairs of each arm."""
     specs, pairs, index = [], [], {}
-    ts = topo.traffic_side
     for ai, a in enumerate(topo.arms):
-        u, n = a.direction, a.normal
+        f = frames[ai]
         for d in (ENTERING, LEAVING):
-            offs = a.lane_offsets(d, ts)
-            if not len(offs):
+            n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
+            if n_lanes <= 0:
                 continue
-            ext = _extent(trajs, topo, ai, d, stops[ai], cfg, length)
+            b = _border_positions([f.lat[(d, k)] for k in range(n_lanes)], f.width)
+            ext = _extent(trajs, f, ai, d, stops[ai], cfg, length)
             n_st = max(2, int(round(ext / cfg.station_spacing)) + 1)
             s = np.linspace(stops[ai], stops[ai] + ext, n_st)
             if d == ENTERING:
                 s = s[::-1]
-            lsign = -1.0 if d == ENTERING else 1.0        # left normal of the driving dir in n
+            end = 0 if d == LEAVING else n_st - 1
             first = len(specs)
-            for k, off in enumerate(offs):
-                lo, ro = off + lsign * 0.5 * a.lane_width, off - lsign * 0.5 * a.lane_width
-                li, ri = (k, k + 1) if abs(lo) < abs(ro) else (k + 1, k)
-                base = topo.center + s[:, None] * u
-                end = 0 if d == LEAVING else n_st - 1
+            for k in range(n_lanes):
+                # left of the driving direction is -n when entering, +n when leaving
+                inner_left = (b[k] < b[k + 1]) == (d == ENTERING)
+                li, ri = (k, k + 1) if inner_left else (k + 1, k)
                 lk = [None] * n_st
                 rk = [None] * n_st
                 lk[end], rk[end] = ('end', ai, d, li), ('end', ai, d, ri)
                 specs.append(LaneletSpec(
                     id=lane_id(ai, d, k), kind='entering' if d == ENTERING else 'leaving',
-                    arm=ai, left=base + lo * n, right=base + ro * n, left_keys=lk,
+                    arm=ai, left=f.point(s, b[li]), right=f.point(s, b[ri]), left_keys=lk,
                     right_keys=rk, lane_index=k))
                 index[(ai, d, k)] = len(specs) - 1
             # neighbour k shares its outer border with k+1's inner border (interior stations)
-            for k in range(len(offs) - 1):
+            for k in range(n_lanes - 1):
                 sa, sb = first + k, first + k + 1
-                side_a = 1 if specs[sa].right_keys[0 if d == LEAVING else -1][3] == k + 1 else 0
-                side_b = 1 - side_a
+                side_a = 1 if specs[sa].right_keys[end][3] == k + 1 else 0
                 for i in range(1, n_st - 1):
-                    pairs.append(((sa, i, side_a), (sb, i, side_b), True))
+                    pairs.append(((sa, i, side_a), (sb, i, 1 - side_a), True))
     return specs, pairs, index
 
 
-def _hermite(p0, t0, p1, t1, s):
-    """Cubic Hermite curve with unit end tangents scaled by the chord length."""
-    k = float(np.linalg.norm(p1 - p0))
+def arc_bezier(p0, t0, p1, t1, s):
+    """Cubic Bezier tangent to unit ``t0`` at ``p0`` and ``t1`` at ``p1``, evaluated at ``s``.
+
+    Handles ``h = chord * 2/3 tan(phi/4) / sin(phi/2)`` (at most chord/2) make it the
+    usual cubic approximation of a circular arc through the turn angle ``phi``.
+    """
+    chord = float(np.linalg.norm(p1 - p0))
+    phi = math.acos(float(np.clip(np.dot(t0, t1), -1.0, 1.0)))
+    ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
+    h = chord * min(ratio, 0.5)
+    q0, q1 = p0 + h * t0, p1 - h * t1
     s = s[:, None]
-    return ((2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * k * t0
-            + (-2 * s**3 + 3 * s**2) * p1 + (s**3 - s**2) * k * t1)
+    return ((1 - s) ** 3 * p0 + 3 * (1 - s) ** 2 * s * q0 + 3 * (1 - s) * s ** 2 * q1
+            + s ** 3 * p1)
 
 
 def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
     """Borders of a connector from the end of ``E`` to the start of ``O``.
 
-    Straight (paper §III-A) or, with ``connector_hermite``, a cubic Hermite center
-    line tangent to both lanes; equidistant stations, end points exactly those of the
+    Straight (paper §III-A) or, with ``connector_hermite``, a circular-arc-like cubic
+    Bezier center line tangent to both lanes (``arc_bezier``); equidistant stations, end points exactly those of the
     lanes (they are shared)."""
     L0, R0, L1, R1 = E.left[-1], E.right[-1], O.left[0], O.right[0]
     c0, c1 = 0.5 * (L0 + R0), 0.5 * (L1 + R1)
@@ -210,7 +318,7 @@ def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
         t0 = 0.5 * (E.left[-1] + E.right[-1]) - 0.5 * (E.left[-2] + E.right[-2])
         t1 = 0.5 * (O.left[1] + O.right[1]) - 0.5 * (O.left[0] + O.right[0])
         t0, t1 = t0 / max(np.linalg.norm(t0), 1e-9), t1 / max(np.linalg.norm(t1), 1e-9)
-        c = _hermite(c0, t0, c1, t1, s)
+        c = arc_bezier(c0, t0, c1, t1, s)
     else:
         c = (1 - s[:, None]) * c0 + s[:, None] * c1
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
@@ -236,10 +344,11 @@ def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
 
 
 def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
-               length: float | None = None, connectors: bool = True):
-    """Specs of all entering/leaving lanelets and evidenced straight connectors."""
-    stops = stop_distances(topo, cfg)
-    specs, pairs, index = _straight_lanes(topo, stops, trajs, cfg, length)
+               length: float | None = None, connectors: bool = True, stops=None, frames=None):
+    """Specs of all entering/leaving lanelets and evidenced connectors."""
+    stops = stop_distances(topo, cfg) if stops is None else stops
+    frames = arm_frames(topo) if frames is None else frames
+    specs, pairs, index = _straight_lanes(topo, frames, stops, trajs, cfg, length)
     if not connectors:
         return specs, pairs, index
     count: dict = {}
