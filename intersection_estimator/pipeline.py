@@ -9,6 +9,7 @@ be read at any time.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+import threading
 import time
 
 import numpy as np
@@ -133,10 +134,15 @@ class OnlineEstimator:
         self.config.validate()
         self._seed = seed
         self._resets = 0
+        self._lock = threading.Lock()   # add() may run in another thread than tick()
         self.reset()
 
     def reset(self) -> None:
         """Forget observations and chains (e.g. when the ego has left the intersection)."""
+        with self._lock:
+            self._reset()
+
+    def _reset(self) -> None:
         rng_topo, rng_lanes = _seeds(self._seed + 7919 * self._resets)
         self._resets += 1
         self._parts: list[Detections] = []
@@ -151,13 +157,19 @@ class OnlineEstimator:
     def n_observations(self) -> int:
         return self._n
 
+    def window(self) -> Detections:
+        """The observations currently in the window."""
+        with self._lock:
+            return Detections.concat(self._parts)
+
     def add(self, dets: Detections) -> int:
         """Append finite detections to the window; returns how many were kept."""
         dets = dets.finite()
         if len(dets):
-            self._parts.append(dets)
-            self._n += len(dets)
-            self._dirty = True
+            with self._lock:
+                self._parts.append(dets)
+                self._n += len(dets)
+                self._dirty = True
         return len(dets)
 
     def _window(self, now: float) -> Detections:
@@ -184,12 +196,12 @@ class OnlineEstimator:
         """Spend one tick's budget on the current window and return the best estimate."""
         cfg = self.config
         t0 = time.perf_counter()
-        if self._dirty:
-            dets = self._window(now)
+        with self._lock:
+            dirty, self._dirty = self._dirty, False
+            dets = self._window(now) if dirty else Detections.concat(self._parts)
+        if dirty:
             self._topo.set_observations(dets)
-            self._dirty = False
             self._lane_key = None if self._lane_key is None else ('stale',) + self._lane_key[1:]
-        dets = Detections.concat(self._parts)
         if wall_budget:
             self._topo.run(time_budget_s=cfg.budget_s * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0))
         else:

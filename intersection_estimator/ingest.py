@@ -1,0 +1,213 @@
+"""Messages in, detections out: what the node and the replay do with every input message.
+
+ROS-free: it sees messages only through :mod:`msg_adapters` (duck-typed), so the node
+feeds it rclpy messages and the replay feeds it messages rosbags decoded. It keeps the
+ego pose buffer, counts what was received and dropped per reason, holds back messages
+that arrive before the ego pose for their stamp, and guards the time base against stamps
+that jump or run backwards.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+import time
+
+import numpy as np
+
+from msg_adapters.detections import AdapterOptions, to_detections
+from msg_adapters.errors import AdapterError
+from msg_adapters.odometry import EgoPoseBuffer
+
+from . import params as P
+
+__all__ = ['ROLE_TYPES', 'Ingest', 'RateLimitedLog']
+
+#: input role (parameter name) -> ROS message type
+ROLE_TYPES = {
+    'radar_topics': 'sensor_msgs/msg/PointCloud2',
+    'radar_scan_topics': 'radar_msgs/msg/RadarScan',
+    'detection_topics': 'geometry_msgs/msg/PoseArray',
+    'object_topics': 'intersection_estimator_msgs/msg/TrackedObjectArray',
+    'autoware_object_topics': 'autoware_perception_msgs/msg/TrackedObjects',
+    'odometry_topic': 'nav_msgs/msg/Odometry',
+}
+
+PENDING_MAX = 256        # messages held back waiting for the ego pose
+JUMP_S = 30.0            # a stamp this far from the time base is suspicious
+JUMP_CONFIRM = 5         # ... and accepted as a new time base after this many in a row
+
+
+class RateLimitedLog:
+    """At most one warning per reason and period (the rest are counted, not printed)."""
+
+    def __init__(self, logger, period_s: float = 5.0):
+        self.logger, self.period_s = logger, period_s
+        self._last: dict[str, float] = {}
+        self.suppressed = Counter()
+
+    def warn(self, reason: str, text: str) -> bool:
+        now = time.monotonic()
+        if now - self._last.get(reason, -1e9) < self.period_s:
+            self.suppressed[reason] += 1
+            return False
+        extra = f' ({self.suppressed.pop(reason)} more since last report)' if self.suppressed[reason] else ''
+        self._last[reason] = now
+        self.logger.warning(text + extra)
+        return True
+
+
+class Ingest:
+    """Converts input messages and adds them to an :class:`~.pipeline.OnlineEstimator`."""
+
+    def __init__(self, values: dict, types=None):
+        self.types = types
+        self.received = Counter()
+        self.dropped = Counter()
+        self._warnings: list[tuple[str, str]] = []
+        self._pending: deque = deque(maxlen=PENDING_MAX)
+        self.latest_stamp: float | None = None
+        self._jumps = 0
+        self.configure(values)
+        self.ego = EgoPoseBuffer(fixed_frame=values['fixed_frame'])
+
+    def configure(self, values: dict) -> None:
+        self.values = values
+        self.opts = AdapterOptions(doppler_field=values['doppler_field'] or None,
+                                   doppler_sign=float(values['doppler_sign']),
+                                   min_existence=float(values['min_existence_probability']),
+                                   mounts=P.mounts(values), max_points=int(values['max_observations']))
+
+    # -- topics -----------------------------------------------------------------------------
+    def topics(self) -> list[tuple[str, str, str]]:
+        """(role, topic, message type) of every configured input."""
+        out = [(role, t, ROLE_TYPES[role]) for role, ts in P.topics(self.values).items() for t in ts]
+        if self.values['odometry_topic']:
+            out.append(('odometry_topic', self.values['odometry_topic'], ROLE_TYPES['odometry_topic']))
+        return out
+
+    def subscriptions(self) -> list[tuple[str, str, type]]:
+        """(role, topic, message class) for live subscriptions; skips types not installed."""
+        subs = []
+        for role, topic, msgtype in self.topics():
+            try:
+                subs.append((role, topic, self.types.get(msgtype).msgclass))
+            except (ImportError, AttributeError) as exc:
+                self.warn('type_not_installed', f'{topic}: {msgtype} is not installed ({exc}); '
+                          'replay bags with it instead')
+        return subs
+
+    # -- messages ---------------------------------------------------------------------------
+    def handle(self, role: str, msg, estimator) -> int:
+        """Convert one message and add it to ``estimator``; returns detections added."""
+        self.received[role] += 1
+        try:
+            stamp = self._check_stamp(msg, estimator)
+            dets = to_detections(msg, self.ego, self.opts)
+        except AdapterError as exc:
+            if exc.reason == 'no_ego_pose' and self._waits_for_pose(msg):
+                self._hold(role, msg)
+                return 0
+            return self.drop(exc.reason, f'{role}: dropped a message: {exc}')
+        added = estimator.add(dets) if len(dets) else 0
+        if len(dets) > added:
+            self.dropped['non_finite'] += len(dets) - added
+        self.latest_stamp = stamp if self.latest_stamp is None else max(self.latest_stamp, stamp)
+        if role == 'odometry_topic' and self._pending:
+            added += self._retry_pending(estimator)
+        return added
+
+    def drop(self, reason: str, text: str) -> int:
+        self.dropped[reason] += 1
+        self.warn(reason, text)
+        return 0
+
+    def count_drop(self, reason: str) -> None:
+        self.dropped[reason] += 1
+
+    def warn(self, reason: str, text: str) -> None:
+        self._warnings.append((reason, text))
+        del self._warnings[:-32]
+
+    def pop_warnings(self) -> list[tuple[str, str]]:
+        out, self._warnings = self._warnings, []
+        return out
+
+    def _hold(self, role, msg) -> None:
+        if len(self._pending) == self._pending.maxlen:
+            self.drop('no_ego_pose', f'{role}: no ego pose for {PENDING_MAX} held-back messages; '
+                      'dropping the oldest (is odometry published?)')
+        self._pending.append((role, msg))
+
+    def _check_stamp(self, msg, estimator) -> float:
+        """Stamp of ``msg`` in seconds; refuses non-finite ones and unconfirmed time jumps."""
+        try:
+            s = msg.header.stamp
+            stamp = float(s.sec) + 1e-9 * float(s.nanosec)
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise AdapterError('malformed', f'no usable header.stamp ({exc})') from exc
+        if not np.isfinite(stamp):
+            raise AdapterError('non_finite', 'stamp is not finite')
+        if self.latest_stamp is not None and abs(stamp - self.latest_stamp) > JUMP_S:
+            self._jumps += 1
+            if self._jumps < JUMP_CONFIRM:
+                raise AdapterError('stamp_jump', f'stamp {stamp:.3f} s is {stamp - self.latest_stamp:+.1f} s '
+                                   'from the time base')
+            self.warn('time_base_reset', f'time base moved to {stamp:.3f} s: forgetting older data')
+            self.latest_stamp, self._jumps = stamp, 0
+            self.ego.clear()
+            self._pending.clear()
+            estimator.reset()
+        else:
+            self._jumps = 0
+        return stamp
+
+    def _waits_for_pose(self, msg) -> bool:
+        latest = self.ego.latest
+        return latest is None or self._stamp(msg) > latest.stamp
+
+    @staticmethod
+    def _stamp(msg) -> float:
+        return float(msg.header.stamp.sec) + 1e-9 * float(msg.header.stamp.nanosec)
+
+    def _retry_pending(self, estimator) -> int:
+        latest = self.ego.latest.stamp
+        pending, self._pending = list(self._pending), deque(maxlen=PENDING_MAX)
+        added = 0
+        for role, msg in pending:
+            stamp = self._stamp(msg)
+            if stamp > latest:
+                self._pending.append((role, msg))
+                continue
+            try:
+                dets = to_detections(msg, self.ego, self.opts)
+            except AdapterError as exc:
+                self.drop(exc.reason, f'{role}: dropped a held-back message: {exc}')
+                continue
+            added += estimator.add(dets)
+        return added
+
+    # -- ego --------------------------------------------------------------------------------
+    def ego_pose(self) -> tuple[float, float, float] | None:
+        p = self.ego.latest
+        return None if p is None else (p.x, p.y, p.yaw)
+
+    def forget_before(self, t: float) -> None:
+        """After a reset: drop held-back messages older than ``t``."""
+        self._pending = deque(((r, m) for r, m in self._pending if self._stamp(m) >= t), maxlen=PENDING_MAX)
+
+
+def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None):
+    """One estimation tick as node and replay both run it: next intersection, then estimate.
+
+    Returns the :class:`~.pipeline.EstimateResult`, or None before the first message.
+    """
+    now = ingest.latest_stamp
+    if now is None:
+        return None
+    ego = ingest.ego_pose()
+    if ego is not None and estimator.passed(ego[:2], ego[2]):
+        if log is not None:
+            log('ego passed the intersection: starting on the next one')
+        estimator.reset()
+        ingest.forget_before(now)
+    return estimator.tick(now, wall_budget=wall_budget)

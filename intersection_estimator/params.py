@@ -1,0 +1,147 @@
+"""Parameters of the node and the replay: one table, ROS-free.
+
+The node declares every entry as a ROS parameter (with description and range), the
+replay reads the same YAML file (``config/intersection_estimator.yaml``), and both turn
+the values into a :class:`~intersection_estimator.pipeline.PipelineConfig` here, so the
+two can never disagree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+import math
+
+import yaml
+
+__all__ = ['ParamSpec', 'PARAMS', 'defaults', 'check', 'load_yaml', 'pipeline_config']
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: default (its type is the parameter's type), range and meaning."""
+
+    name: str
+    default: object
+    description: str
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple = ()
+
+    def allowed(self) -> str:
+        if self.choices:
+            return 'one of ' + ', '.join(map(repr, self.choices))
+        if self.lo is not None and self.hi is not None:
+            return f'in [{self.lo}, {self.hi}]'
+        return 'a ' + type(self.default).__name__
+
+
+_TOPIC_ROLES = ('radar_topics', 'radar_scan_topics', 'detection_topics', 'object_topics',
+                'autoware_object_topics')
+
+PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec('fixed_frame', 'map', 'fixed frame of all outputs (REP 105: map or odom)'),
+    ParamSpec('radar_topics', ['/perception/radar/points'],
+              'sensor_msgs/PointCloud2 radar clouds with x, y, z, Doppler (and rcs)'),
+    ParamSpec('radar_scan_topics', [''], 'radar_msgs/RadarScan topics (live only if radar_msgs is installed)'),
+    ParamSpec('detection_topics', [''], 'geometry_msgs/PoseArray object detections, orientation = heading'),
+    ParamSpec('object_topics', ['/perception/objects'],
+              'intersection_estimator_msgs/TrackedObjectArray tracked objects'),
+    ParamSpec('autoware_object_topics', [''],
+              'autoware_perception_msgs/TrackedObjects (live only if Autoware msgs are installed)'),
+    ParamSpec('odometry_topic', '/localization/odometry', 'nav_msgs/Odometry ego pose in the fixed frame'),
+    ParamSpec('doppler_field', '', "Doppler field name; '' = first of doppler, velocity, radial_velocity, v_r"),
+    ParamSpec('doppler_sign', 1, '+1: positive Doppler = moving away from the sensor; -1: the opposite',
+              choices=(1, -1)),
+    ParamSpec('min_existence_probability', 0.3, 'tracked objects below this are ignored', 0.0, 1.0),
+    ParamSpec('mount_frames', ['radar'], 'sensor frame ids with a static mount on base_link'),
+    ParamSpec('mount_x', [3.7], 'mount x of each mount_frames entry in base_link [m]'),
+    ParamSpec('mount_y', [0.0], 'mount y of each mount_frames entry in base_link [m]'),
+    ParamSpec('mount_yaw', [0.0], 'mount yaw of each mount_frames entry in base_link [rad]'),
+    ParamSpec('timer_period', 0.2, 'estimation tick period [s]', 0.01, 10.0),
+    ParamSpec('budget_ms', 150.0, 'wall time per tick for topology + lane course [ms]', 1.0, 10000.0),
+    ParamSpec('lane_share', 0.6, 'share of the tick budget for the lane course', 0.0, 0.95),
+    ParamSpec('topology_samples', 5000, 'topology samples per tick in sample-budget mode (replay)', 1, 10**7),
+    ParamSpec('lane_samples', 20000, 'lane-course samples per tick in sample-budget mode (replay)', 0, 10**8),
+    ParamSpec('window_s', 120.0, 'observations older than this are forgotten [s]', 1.0, 3600.0),
+    ParamSpec('max_observations', 200000, 'cap on observations kept in the window', 100, 10**7),
+    ParamSpec('lanes_enabled', True, 'estimate the lane course (needs tracked objects)'),
+    ParamSpec('reset_distance', 25.0, 'ego past the center by this -> start on the next intersection [m]',
+              1.0, 1000.0),
+    ParamSpec('seed', 0, 'seed of every random draw', 0, 2**31 - 1),
+)
+
+_BY_NAME = {p.name: p for p in PARAMS}
+
+
+def defaults() -> dict:
+    return {p.name: p.default for p in PARAMS}
+
+
+def check(name: str, value) -> str | None:
+    """Return why ``value`` is not allowed for parameter ``name`` (None if it is)."""
+    spec = _BY_NAME.get(name)
+    if spec is None:
+        return f'unknown parameter {name!r}'
+    want = type(spec.default)
+    if want is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if want is list:
+        if not isinstance(value, (list, tuple)):
+            return f'{name} must be a list, got {value!r}'
+    elif not isinstance(value, want) or (want is int and isinstance(value, bool)):
+        return f'{name} must be a {want.__name__}, got {value!r}'
+    if isinstance(value, float) and not math.isfinite(value):
+        return f'{name}={value!r} is not finite: must be {spec.allowed()}'
+    if spec.choices and value not in spec.choices:
+        return f'{name}={value!r} not allowed: must be {spec.allowed()}'
+    if spec.lo is not None and not (spec.lo <= value <= spec.hi):
+        return f'{name}={value!r} out of range: must be {spec.allowed()}'
+    return None
+
+
+def check_all(values: dict) -> list[str]:
+    """Every problem with a full parameter set, including cross-parameter ones."""
+    errors = [e for n, v in values.items() if (e := check(n, v))]
+    if not errors:
+        n = len(values['mount_frames'])
+        for k in ('mount_x', 'mount_y', 'mount_yaw'):
+            if len(values[k]) != n:
+                errors.append(f'{k} must have one entry per mount_frames entry ({n}), got {len(values[k])}')
+    return errors
+
+
+def load_yaml(path: str | Path, node_name: str = 'intersection_estimator') -> dict:
+    """Read a ROS 2 parameter file (``node: ros__parameters: ...``) into a full value dict."""
+    data = yaml.safe_load(Path(path).read_text()) or {}
+    section = data.get(node_name) or data.get('/**') or next(iter(data.values()), {})
+    values = defaults()
+    values.update((section or {}).get('ros__parameters', {}))
+    errors = check_all(values)
+    if errors:
+        raise ValueError(f'{path}: ' + '; '.join(errors))
+    return values
+
+
+def topics(values: dict) -> dict[str, list[str]]:
+    """Configured input topics per role (empty strings dropped)."""
+    return {role: [t for t in values[role] if t] for role in _TOPIC_ROLES}
+
+
+def mounts(values: dict) -> dict[str, tuple[float, float, float]]:
+    return {f: (float(x), float(y), float(yaw)) for f, x, y, yaw in
+            zip(values['mount_frames'], values['mount_x'], values['mount_y'], values['mount_yaw'])}
+
+
+def pipeline_config(values: dict):
+    """Map parameter values onto a validated :class:`~.pipeline.PipelineConfig`."""
+    from .pipeline import PipelineConfig
+    cfg = replace(PipelineConfig(), window_s=float(values['window_s']),
+                  max_observations=int(values['max_observations']),
+                  topology_samples=int(values['topology_samples']),
+                  lane_samples=int(values['lane_samples']),
+                  budget_s=float(values['budget_ms']) / 1e3, lane_share=float(values['lane_share']),
+                  lanes_enabled=bool(values['lanes_enabled']),
+                  reset_distance=float(values['reset_distance']))
+    cfg.validate()
+    return cfg
