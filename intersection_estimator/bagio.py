@@ -62,10 +62,14 @@ ROLE_TYPES = {
     'tracked_objects': ('intersection_estimator_msgs/msg/TrackedObjectArray',
                         'autoware_perception_msgs/msg/TrackedObjects',
                         'autoware_auto_perception_msgs/msg/TrackedObjects',
+                        'autoware_perception_msgs/msg/PredictedObjects',
+                        'autoware_auto_perception_msgs/msg/PredictedObjects',
                         'derived_object_msgs/msg/ObjectArray'),
+    'detected_objects': ('autoware_perception_msgs/msg/DetectedObjects',
+                         'autoware_auto_perception_msgs/msg/DetectedObjects'),
     'odometry': ('nav_msgs/msg/Odometry',),
 }
-_INPUT_ROLES = ('radar_clouds', 'radar_scans', 'pose_arrays', 'tracked_objects')
+_INPUT_ROLES = ('radar_clouds', 'radar_scans', 'pose_arrays', 'tracked_objects', 'detected_objects')
 _MSGS_PKG = 'intersection_estimator_msgs'
 
 
@@ -431,8 +435,10 @@ def open_bags(paths, *, strict: bool = False) -> BagSet:
 
 
 def detect_topics(connections, first_messages=None) -> dict[str, list[str]]:
-    """Input topics per role by message type: ``{'radar_clouds': [...], 'radar_scans': [...],
-    'pose_arrays': [...], 'tracked_objects': [...], 'odometry': [...]}`` (empty roles omitted).
+    """Input topics per role by message type (:data:`ROLE_TYPES`): ``{'radar_clouds': [...],
+    'radar_scans': [...], 'pose_arrays': [...], 'tracked_objects': [...],
+    'detected_objects': [...], 'odometry': [...]}``, empty roles omitted, topics sorted.
+    Object roles are all read by ``msg_adapters.tracked_objects.read_objects``.
 
     connections: :class:`TopicInfo` s or anything with ``topic`` and ``msgtype``.
     PointCloud2 topics count as radar when their first message (``first_messages[topic]``)

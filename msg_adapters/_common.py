@@ -39,8 +39,9 @@ def split_stamp(t: float) -> tuple[int, int]:
 def yaw_from_quat(qx, qy, qz, qw) -> np.ndarray:
     """Yaw of (arrays of) quaternions, scale invariant; NaN for a zero quaternion."""
     qx, qy, qz, qw = (np.asarray(q, dtype=np.float64) for q in (qx, qy, qz, qw))
-    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
-    n2 = qx * qx + qy * qy + qz * qz + qw * qw
+    with np.errstate(over='ignore', invalid='ignore'):   # absurd quaternions give NaN, quietly
+        yaw = np.arctan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz)
+        n2 = qx * qx + qy * qy + qz * qz + qw * qw
     return np.where(n2 > 1e-12, yaw, np.nan)
 
 

@@ -11,6 +11,10 @@ Families (detected by their fields, so rclpy and rosbags messages read alike):
   ``kinematics.twist_with_covariance.twist.linear`` in the *object* frame. Heading = pose
   yaw + direction of that velocity when moving; when standing, the pose yaw if
   ``orientation_availability`` is AVAILABLE, else unknown (NaN).
+* ``autoware_perception_msgs/msg/PredictedObjects`` (what Autoware's perception publishes
+  last): as TrackedObjects with ``kinematics.initial_pose_with_covariance`` /
+  ``initial_twist_with_covariance``; ``DetectedObjects`` (no identity: ids -1).
+  ``autoware_auto_perception_msgs`` (pre-2024 names) read the same.
 * ``derived_object_msgs/msg/ObjectArray``: ``uint32 id``, pose (yaw = heading), twist;
   its classification is mapped to Autoware label ids; existence is 1.
 """
@@ -44,7 +48,7 @@ _AVAILABLE = 2
 
 @dataclass
 class ObjectList:
-    """Objects in the message frame: ids int64 (>= 0), xy (N, 2), yaw = heading (N,) [rad,
+    """Objects in the message frame: ids int64 (>= 0; -1 without identity), xy (N, 2), yaw = heading (N,) [rad,
     NaN unknown], speed (N,) [m/s], label int16 (Autoware ids), existence (N,) in [0, 1]."""
 
     frame_id: str
@@ -76,13 +80,20 @@ def id_to_uuid(i: int) -> np.ndarray:
 
 
 def object_family(msg) -> str:
-    """'ours' | 'autoware' | 'derived' | 'empty' by the fields of the first object."""
+    """'ours' | 'autoware' | 'autoware_predicted' | 'autoware_detected' | 'derived' | 'empty'
+    by the fields of the first object."""
     objs = msg.objects
     if len(objs) == 0:
         return 'empty'
     o = objs[0]
-    if hasattr(o, 'kinematics') and hasattr(o, 'object_id'):
-        return 'autoware'
+    k = getattr(o, 'kinematics', None)
+    if k is not None:
+        if hasattr(k, 'initial_pose_with_covariance'):
+            return 'autoware_predicted'
+        if hasattr(o, 'object_id'):
+            return 'autoware'
+        if hasattr(k, 'pose_with_covariance'):
+            return 'autoware_detected'
     if hasattr(o, 'velocity') and hasattr(o, 'existence_probability'):
         return 'ours'
     if hasattr(o, 'twist') and hasattr(o, 'pose'):
@@ -96,23 +107,34 @@ def _pose_row(p):
 
 
 def _best_label(classes) -> int:
+    """Label of the most probable classification (a list, or one classification)."""
     best, prob = 0, -np.inf
-    for c in classes:
+    for c in (classes if hasattr(classes, '__len__') else [classes]):
         if float(c.probability) > prob:
             best, prob = int(c.label), float(c.probability)
     return best
 
 
+def _autoware_row(o, family):
+    k = o.kinematics
+    if family == 'autoware_predicted':  # PredictedObjects: id (old) or object_id (current)
+        uuid = getattr(o, 'object_id', None) or o.id
+        pose, twist, avail = k.initial_pose_with_covariance.pose, k.initial_twist_with_covariance.twist, _AVAILABLE
+    else:
+        uuid = getattr(o, 'object_id', None)
+        pose, twist, avail = k.pose_with_covariance.pose, k.twist_with_covariance.twist, k.orientation_availability
+    oid = uuid_to_id(uuid.uuid) if uuid is not None else -1
+    v = twist.linear
+    return (oid, *_pose_row(pose), v.x, v.y, _best_label(o.classification),
+            getattr(o, 'existence_probability', 1.0), avail)
+
+
 def _rows(msg, family):
-    """(N, 12) rows: id, x, y, qx, qy, qz, qw, vx, vy, label, existence, availability."""
+    """ids (N,) and (N, 11) rows: x, y, qx, qy, qz, qw, vx, vy, label, existence, availability."""
     out = []
     for o in msg.objects:
-        if family == 'autoware':
-            k = o.kinematics
-            v = k.twist_with_covariance.twist.linear
-            out.append((uuid_to_id(o.object_id.uuid), *_pose_row(k.pose_with_covariance.pose),
-                        v.x, v.y, _best_label(o.classification), o.existence_probability,
-                        k.orientation_availability))
+        if family.startswith('autoware'):
+            out.append(_autoware_row(o, family))
         elif family == 'ours':
             out.append((int(o.id) & _MASK63, *_pose_row(o.pose), o.velocity.x, o.velocity.y,
                         o.classification, o.existence_probability, _AVAILABLE))
@@ -143,7 +165,7 @@ def read_objects(msg, *, min_speed_for_heading: float = MIN_SPEED_FOR_HEADING) -
     speed = np.hypot(v[:, 0], v[:, 1])
     moving = np.isfinite(speed) & (speed >= min_speed_for_heading)
     vdir = np.arctan2(v[:, 1], v[:, 0])
-    if family == 'autoware':
+    if family.startswith('autoware'):   # twist in the object frame
         yaw = np.where(moving, qyaw + vdir, np.where(a[:, 10] == _AVAILABLE, qyaw, np.nan))
         yaw = (yaw + np.pi) % (2.0 * np.pi) - np.pi
     elif family == 'ours':

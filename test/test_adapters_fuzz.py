@@ -34,6 +34,8 @@ def paths(obj, prefix=()):
     items = (vars(obj).items() if isinstance(obj, NS)
              else enumerate(obj) if isinstance(obj, list) else ())
     for k, v in items:
+        if isinstance(k, str) and k.startswith('__'):
+            continue
         out.append(prefix + (k,))
         out.extend(paths(v, prefix + (k,)))
     return out
@@ -73,7 +75,8 @@ BASE = {k: to_ns(v) for k, v in samples().items()}
 JUNK = st.one_of(st.none(), st.text(max_size=4), st.integers(-2**70, 2**70),
                  st.floats(allow_nan=True, allow_infinity=True), st.booleans(),
                  st.lists(st.integers(-5, 300), max_size=4), st.binary(max_size=8),
-                 st.just(np.array([np.nan, 1e308])), st.just(NS()), st.just([NS(x=1)]))
+                 st.builds(lambda: np.array([np.nan, 1e308])), st.builds(NS),
+                 st.builds(lambda: [NS(x=1)]))   # builds: fresh objects, mutations must not leak
 
 
 def ego():

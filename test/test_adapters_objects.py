@@ -136,3 +136,34 @@ def test_pose_array_non_unit_quaternion():
     q = NS(x=0.0, y=0.0, z=3 * math.sin(h / 2), w=3 * math.cos(h / 2))
     res = read_pose_array(NS(header=hdr, poses=[NS(position=NS(x=1.0, y=2.0, z=0.0), orientation=q)]))
     assert res.yaw[0] == pytest.approx(h)
+
+
+def _uuid(i):
+    return NS(uuid=id_to_uuid(i))
+
+
+def _kin_pose(x, y, yaw):
+    return NS(pose=NS(position=NS(x=x, y=y, z=0.0),
+                      orientation=NS(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))))
+
+
+def test_autoware_predicted_and_detected_objects():
+    hdr = NS(frame_id='map', stamp=NS(sec=7, nanosec=500_000_000))
+    cls = [NS(label=2, probability=0.8), NS(label=1, probability=0.2)]
+    lin = NS(twist=NS(linear=NS(x=0.0, y=4.0, z=0.0)))
+    pred = NS(header=hdr, objects=[NS(object_id=_uuid(42), existence_probability=0.7, classification=cls,
+                                      kinematics=NS(initial_pose_with_covariance=_kin_pose(1.0, 2.0, 0.5),
+                                                    initial_twist_with_covariance=lin))])
+    objs = read_objects(pred)
+    assert objs.family == 'autoware_predicted' and objs.ids[0] == 42 and objs.label[0] == 2
+    assert objs.yaw[0] == pytest.approx(0.5 + math.pi / 2) and objs.speed[0] == 4.0
+    old = NS(header=hdr, objects=[NS(id=_uuid(9), classification=NS(label=3, probability=1.0),
+                                     kinematics=pred.objects[0].kinematics)])
+    objs = read_objects(old)              # pre-2024: 'id' and one classification
+    assert objs.ids[0] == 9 and objs.label[0] == 3 and objs.existence[0] == 1.0
+    det = NS(header=hdr, objects=[NS(existence_probability=0.9, classification=cls,
+                                     kinematics=NS(pose_with_covariance=_kin_pose(5.0, 6.0, -1.0),
+                                                   twist_with_covariance=lin, orientation_availability=2))])
+    objs = read_objects(det)
+    assert objs.family == 'autoware_detected' and objs.ids[0] == -1
+    np.testing.assert_allclose(objs.xy, [[5.0, 6.0]])
