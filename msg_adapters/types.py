@@ -42,7 +42,7 @@ def full_name(msgtype: str) -> str:
 
 
 def _scalar(kind: str, value):
-    if kind in ('string', 'wstring'):
+    if kind.startswith(('string', 'wstring')):    # also bounded: string<=N
         return str(value)
     if kind in ('bool', 'boolean'):
         return bool(value)
@@ -87,7 +87,7 @@ class RclpyTypes:
             if inner in _TYPECODE:
                 arr = _numeric(value, _NP[inner] if inner in _NP else np.uint8)
                 return array.array(_TYPECODE[inner], arr.tobytes())
-            if inner in ('string', 'wstring'):
+            if inner.startswith(('string', 'wstring')):
                 return [str(v) for v in value]
             return list(value)
         if kind.endswith(']'):
