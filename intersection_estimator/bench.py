@@ -199,7 +199,7 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
 def _fmt(v, kind):
     if v is None:
         return '-'
-    return {'pct': f'{100 * v:.2f} %', 'm': f'{v:.2f}', 'deg': f'{v:.2f}', 'cm': f'{v:.1f}',
+    return {'pct': f'{100 * v:.2f} %', 'pct0': f'{100 * v:.0f} %', 'm': f'{v:.2f}', 'deg': f'{v:.2f}', 'cm': f'{v:.1f}',
             'ms': f'{v:.1f}'}[kind]
 
 
@@ -222,7 +222,13 @@ def format_table(result: dict) -> str:
          paper('angle_error_deg_mean', 'deg')),
         ('lane course error mean [cm]', _fmt(s['lane_error_cm_mean'], 'cm'),
          paper('lane_error_cm_mean', 'cm')),
+        ('lane error entering / leaving / connector [cm]',
+         ' / '.join(_fmt(s.get(f'lane_error_cm_mean_{k}'), 'cm')
+                    for k in ('entering', 'leaving', 'connector')), ''),
         ('lane recall (lanes with traffic)', _fmt(s['lane_recall'], 'pct'), ''),
+        ('  entering / leaving / connector',
+         ' / '.join(_fmt(s.get(f'lane_recall_{k}'), 'pct0')
+                    for k in ('entering', 'leaving', 'connector')), ''),
         ('lane precision', _fmt(s['lane_precision'], 'pct'), ''),
         ('connectivity recall', _fmt(s['connectivity_recall'], 'pct'), ''),
         (f"topology time median / p95 [ms] @{cfg['samples']}",

@@ -275,7 +275,8 @@ def _failed(reason, n_arms_true=None, gt_lanes=None) -> dict:
             'lanes_true_traffic': traffic, 'lanes_est': 0, 'lanes_matched': 0,
             'lanes_matched_traffic': 0, 'lane_error_cm': None, 'lane_error_cm_sum': 0.0,
             'lane_recall': 0.0 if traffic else None, 'lane_precision': None,
-            'connectors_matched': 0, 'connectors_connected': 0, 'connectivity_recall': None}
+            'connectors_matched': 0, 'connectors_connected': 0, 'connectivity_recall': None,
+            'by_kind': None}
 
 
 def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
@@ -298,6 +299,7 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
     n_traffic = sum(g['traffic'] > 0 for g in gl)
     m_traffic = sum(gl[g]['traffic'] > 0 for g in match)
     n_con, ok_con = _connectivity(el, gl, match)
+    by_kind = _by_kind(el, gl, match)
     return {'ok': True, 'reason': None, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
             'arm_correct': arm_correct, 'topology_correct': topo,
             'center_error_m': float(np.linalg.norm(ec - gc)),
@@ -310,7 +312,20 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
             'lane_recall': m_traffic / n_traffic if n_traffic else None,
             'lane_precision': len(match) / len(el) if el else None,
             'connectors_matched': n_con, 'connectors_connected': ok_con,
-            'connectivity_recall': ok_con / n_con if n_con else None}
+            'connectivity_recall': ok_con / n_con if n_con else None, 'by_kind': by_kind}
+
+
+def _by_kind(est_lanes, gt_lanes, match) -> dict:
+    """Lane counts and error sums per kind (where does the lane step lose accuracy?)."""
+    out = {}
+    for kind in KINDS:
+        m = {g: d for g, (_, d) in match.items() if gt_lanes[g]['kind'] == kind}
+        out[kind] = {'est': sum(e['kind'] == kind for e in est_lanes),
+                     'true_traffic': sum(g['kind'] == kind and g['traffic'] > 0 for g in gt_lanes),
+                     'matched': len(m),
+                     'matched_traffic': sum(gt_lanes[g]['traffic'] > 0 for g in m),
+                     'error_cm_sum': float(100 * sum(m.values()))}
+    return out
 
 
 # ---------------------------------------------------------------- summary
@@ -350,6 +365,12 @@ def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
         'lane_precision': _ratio(total('lanes_matched'), total('lanes_est')),
         'connectivity_recall': _ratio(total('connectors_connected'), total('connectors_matched')),
     }
+    for kind in KINDS:
+        k = [m['by_kind'][kind] for m in metrics if m.get('by_kind')]
+        summary[f'lane_error_cm_mean_{kind}'] = _ratio(sum(x['error_cm_sum'] for x in k),
+                                                       sum(x['matched'] for x in k))
+        summary[f'lane_recall_{kind}'] = _ratio(sum(x['matched_traffic'] for x in k),
+                                                sum(x['true_traffic'] for x in k))
     for step in ('topology', 'lanes', 'total'):
         vals = [t.get(step) for t in timings if t]
         summary[f'{step}_ms_median'] = _pct(vals, 50)

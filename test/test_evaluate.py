@@ -254,3 +254,19 @@ def test_evaluate_cli_single_and_cases(tmp_path, scenario, capsys):
     assert out['cases']['c1']['ok'] is False and 'cannot read' in out['cases']['c1']['reason']
     assert 'topology_accuracy' in capsys.readouterr().out
     assert _cli(['evaluate']) == 2
+
+
+def test_per_kind_breakdown(gt):
+    est = copy.deepcopy(gt)
+    for x in est['lanes']:
+        if x['kind'] == 'connector':
+            x['center_line'] = _shift(x['center_line'], 0.5)
+    est['lanes'] = [x for x in est['lanes'] if not (x['kind'] == 'leaving' and x['arm'] == 0)]
+    m = evaluate(est, gt)
+    bk = m['by_kind']
+    assert bk['entering']['error_cm_sum'] < 0.1
+    assert bk['connector']['error_cm_sum'] / bk['connector']['matched'] == pytest.approx(50, abs=1)
+    assert bk['leaving']['matched_traffic'] < bk['leaving']['true_traffic']
+    s = aggregate([m])
+    assert s['lane_recall_entering'] == 1.0 and s['lane_recall_leaving'] < 1.0
+    assert s['lane_error_cm_mean_connector'] == pytest.approx(50, abs=1)
