@@ -234,6 +234,7 @@ class _Bag:
         self._reader = None
         self._scan_files: list[Path] = []
         self.connections: list[tuple[str, str, int]] = []  # topic, msgtype, count
+        self.span = (0, 0)                                  # first, last message time [ns]
         self._open()
 
     def _open(self):
@@ -251,6 +252,8 @@ class _Bag:
         except Exception as exc:  # sqlite3.DatabaseError and friends
             raise BagError('corrupt', f'{type(exc).__name__}: {exc}', self.path) from exc
         self._reader = reader
+        if reader.message_count:
+            self.span = (reader.start_time, reader.end_time - 1)
         self.typestore = _bag_typestore(
             (c.msgtype, c.msgdef.format.name.lower(), c.msgdef.data) for c in reader.connections)
         self.connections = [(c.topic, c.msgtype, c.msgcount) for c in reader.connections]
@@ -262,13 +265,17 @@ class _Bag:
             what = 'not a rosbag2 bag (no metadata.yaml, .mcap or .db3)' if not files else 'no MCAP magic'
             raise BagError('not_a_bag', f'{what}: {exc}', self.path) from exc
         self._scan_files = files
-        schemas, channels, counts, problem = {}, {}, {}, None
+        schemas, channels, counts, problem, times = {}, {}, {}, None, []
         for f in files:
             try:
                 for rec in _scan_mcap(f):
                     _collect(rec, schemas, channels, counts)
+                    if rec[0] == 'message':
+                        times.append(rec[2])
             except BagError as err:
                 problem = err
+        if times:
+            self.span = (min(times), max(times))
         self.problem = problem or BagError('corrupt', f'index unreadable ({exc}); read by scanning', self.path)
         if not channels:
             raise BagError(self.problem.reason, f'{self.problem.message}; no readable channel', self.path)
@@ -368,6 +375,19 @@ class BagSet:
     @property
     def truncated(self) -> bool:
         return bool(self.problems)
+
+    @property
+    def message_count(self) -> int:
+        """Messages in all bags (as indexed; for a damaged bag: as far as readable)."""
+        return sum(t.count for t in self.topics)
+
+    @property
+    def time_span(self) -> tuple[float, float]:
+        """(first, last) message time [s] over all bags; (0, 0) when empty."""
+        spans = [b.span for b in self.bags if b.span != (0, 0)]
+        if not spans:
+            return 0.0, 0.0
+        return min(s[0] for s in spans) * 1e-9, max(s[1] for s in spans) * 1e-9
 
     @property
     def topics(self) -> list[TopicInfo]:

@@ -77,6 +77,9 @@ def test_scenario_bag_round_trip(scenario, scenario_bag):
 def test_scenario_bag_topics_frames_and_counts(scenario, scenario_bag):
     path, info = scenario_bag
     n = len(scenario.ego.t)
+    with open_bags(path) as bags:
+        assert bags.message_count == sum(info.counts.values())
+        assert bags.time_span == pytest.approx((BAG_T0, BAG_T0 + scenario.ego.t[-1]))
     assert info.counts == {SCENARIO_TOPICS['tf_static']: 1, **{t: n for t in MODE_OF},
                            SCENARIO_TOPICS['odometry']: n}
     with open_bags(path) as bags:
@@ -132,6 +135,7 @@ def test_truncated_bag_yields_what_it_can(scenario_bag, tmp_path, frac):
     shutil.copytree(path, tmp_path / 'cut')
     (tmp_path / 'cut' / 'scenario.mcap').write_bytes(data[:int(len(data) * frac)])
     with open_bags(tmp_path / 'cut') as bags:
+        assert bags.time_span[0] == pytest.approx(BAG_T0)
         msgs = list(bags.messages())
         assert [p.reason for p in bags.problems] == ['truncated']
         assert '\n' not in str(bags.problems[0])
