@@ -89,7 +89,7 @@ class LaneConfig:
     min_connector_evidence: int = 1
     point_gate: float = 6.0
     sigma_perp: float = 1.0
-    outlier_weight: float = 0.01
+    outlier_weight: float = 0.0
     sigma_delta: float = 0.15
     tau: float = 1.0
     width_min: float = 2.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..model import Intersection, Lanelet
 from ..observations import Detections
@@ -69,20 +70,19 @@ def _connector_pairs(graph: LaneGraph, radius: float) -> list[tuple[int, int]]:
     conn = [i for i, s in enumerate(graph.specs) if s.kind == 'connector']
     if len(conn) < 2 or radius <= 0:
         return []
+    g = np.concatenate([np.arange(graph.st_off[c] + 1, graph.st_off[c] + graph.st_n[c] - 1)
+                        for c in conn])
+    if not len(g):
+        return []
+    R, L = graph.P[graph.ref[2 * g + 1]], graph.P[graph.ref[2 * g]]
+    pairs = cKDTree(R).query_ball_tree(cKDTree(L), radius)
     cand = []
-    for a in conn:
-        ga = np.arange(graph.st_off[a] + 1, graph.st_off[a] + graph.st_n[a] - 1)
-        for b in conn:
-            if a == b:
+    for x, js in enumerate(pairs):
+        for y in js:
+            ga, gb = g[x], g[y]
+            if graph.st_ll[ga] == graph.st_ll[gb] or graph.st_normal[ga] @ graph.st_normal[gb] <= 0.9:
                 continue
-            gb = np.arange(graph.st_off[b] + 1, graph.st_off[b] + graph.st_n[b] - 1)
-            if not len(ga) or not len(gb):
-                continue
-            Ra, Lb = graph.P[graph.ref[2 * ga + 1]], graph.P[graph.ref[2 * gb]]
-            D = np.linalg.norm(Ra[:, None] - Lb[None], axis=2)
-            same = (graph.st_normal[ga][:, None] * graph.st_normal[gb][None]).sum(2) > 0.9
-            i, j = np.nonzero((D < radius) & same)
-            cand += [(D[x, y], 2 * ga[x] + 1, 2 * gb[y]) for x, y in zip(i, j)]
+            cand.append((float(np.linalg.norm(R[x] - L[y])), 2 * ga + 1, 2 * gb))
     used, out = set(), []
     for _, sa, sb in sorted(cand):
         if sa not in used and sb not in used:
