@@ -33,7 +33,7 @@ import numpy as np
 __all__ = ['BagError', 'BagMessage', 'BagSet', 'BagWriter', 'TopicInfo', 'typestore',
            'open_bags', 'detect_topics', 'write_scenario_bag', 'SCENARIO_TOPICS',
            'SCENARIO_FRAMES', 'SCENARIO_RADAR_MOUNT', 'BAG_T0', 'LATCHED', 'ROLE_TYPES',
-           'ScenarioBagInfo']
+           'ScenarioBagInfo', 'scenario_messages', 'scenario_mount']
 
 # ----------------------------------------------------------------------------- constants
 
@@ -706,7 +706,7 @@ class BagWriter:
 # ----------------------------------------------------------------------------- scenario bags
 
 
-def _mount_of(scenario) -> tuple[float, float, float]:
+def scenario_mount(scenario) -> tuple[float, float, float]:
     """Radar mount (x, y, yaw) in base_link: from sensor_xy vs the ego pose, else the config."""
     ego = scenario.ego
     for mode in ('raw', 'tracked', 'heading'):
@@ -724,6 +724,9 @@ def _mount_of(scenario) -> tuple[float, float, float]:
         mx, my = np.round(np.median(local, axis=0), 9) + 0.0
         return float(mx), float(my), 0.0
     return float(getattr(scenario.config, 'sensor_mount', 0.0)), 0.0, 0.0
+
+
+_mount_of = scenario_mount   # old private name, used by soak
 
 
 def _tf_static(types, t: float, parent: str, child: str, mount) -> object:
@@ -757,6 +760,48 @@ class ScenarioBagInfo:
     size: int = 0
 
 
+def scenario_messages(scenario, types, sensors=('tracked', 'raw', 'heading'), autoware: bool = True,
+                      t0: float = BAG_T0, mount=None) -> Iterator[tuple[float, str, object]]:
+    """``(t, topic, msg)`` of a simulated scenario in time order, messages built with ``types``.
+
+    What :func:`write_scenario_bag` records (see there), also usable without a bag (soak,
+    DDS tests with ``RclpyTypes``). ``mount`` defaults to :func:`scenario_mount`.
+    """
+    from msg_adapters.odometry import odometry_msg
+    from msg_adapters.pointcloud2 import radar_cloud_msg
+    from msg_adapters.pose_array import pose_array_msg
+    from msg_adapters.tracked_objects import autoware_tracked_objects_msg, tracked_object_array_msg
+    from msg_adapters.types import make_header
+
+    ego = scenario.ego
+    fx, base, radar = SCENARIO_FRAMES['fixed'], SCENARIO_FRAMES['base'], SCENARIO_FRAMES['radar']
+    mount = scenario_mount(scenario) if mount is None else mount
+    frames = {s: scenario.frames(s) for s in sensors}
+    rate = _yaw_rate(ego.t, ego.yaw)
+    yield t0 + float(ego.t[0]), SCENARIO_TOPICS['tf_static'], _tf_static(
+        types, t0 + float(ego.t[0]), base, radar, mount)
+    for i, te in enumerate(ego.t):
+        t = t0 + float(te)
+        yield t, SCENARIO_TOPICS['odometry'], odometry_msg(
+            types, t, ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i], vx=ego.speed[i], yaw_rate=rate[i],
+            frame_id=fx, child_frame_id=base)
+        for s, it in frames.items():
+            stamp, d = next(it)
+            ts = t0 + stamp
+            if s == 'raw':
+                yield ts, SCENARIO_TOPICS['radar'], radar_cloud_msg(
+                    types, make_header(types, radar, ts),
+                    _to_sensor(d.xy, (ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i]), mount), d.doppler, d.rcs)
+            elif s == 'tracked':
+                args = (make_header(types, fx, ts), d.track_id, d.xy, d.heading, d.speed, d.label)
+                yield ts, SCENARIO_TOPICS['objects'], tracked_object_array_msg(types, *args)
+                if autoware:
+                    yield ts, SCENARIO_TOPICS['autoware'], autoware_tracked_objects_msg(types, *args)
+            elif s == 'heading':
+                yield ts, SCENARIO_TOPICS['detections'], pose_array_msg(
+                    types, make_header(types, fx, ts), d.xy, d.heading)
+
+
 def write_scenario_bag(scenario, path, sensors=('tracked', 'raw', 'heading'), autoware: bool = True,
                        t0: float = BAG_T0) -> ScenarioBagInfo:
     """Write a simulated scenario as a rosbag2 MCAP bag on the node's input topics.
@@ -776,52 +821,22 @@ def write_scenario_bag(scenario, path, sensors=('tracked', 'raw', 'heading'), au
 
     Every sensor topic gets a message per cycle (empty ones too). Deterministic.
     """
-    from msg_adapters.odometry import odometry_msg
-    from msg_adapters.pointcloud2 import radar_cloud_msg
-    from msg_adapters.pose_array import pose_array_msg
-    from msg_adapters.tracked_objects import autoware_tracked_objects_msg, tracked_object_array_msg
-    from msg_adapters.types import make_header
-
-    ego = scenario.ego
-    fx, base, radar = SCENARIO_FRAMES['fixed'], SCENARIO_FRAMES['base'], SCENARIO_FRAMES['radar']
-    mount = _mount_of(scenario)
+    mount = scenario_mount(scenario)
     info = ScenarioBagInfo(Path(path), mount=mount, t0=t0)
-    frames = {s: scenario.frames(s) for s in sensors}
-    rate = _yaw_rate(ego.t, ego.yaw)
     with BagWriter(path) as w:
-        T = w.types
-
-        def put(topic, msg, t):
+        for t, topic, msg in scenario_messages(scenario, w.types, sensors, autoware, t0, mount):
             w.write(topic, msg, t)
             info.counts[topic] = info.counts.get(topic, 0) + 1
-
-        put(SCENARIO_TOPICS['tf_static'], _tf_static(T, t0 + float(ego.t[0]), base, radar, mount),
-            t0 + float(ego.t[0]))
-        for i, te in enumerate(ego.t):
-            t = t0 + float(te)
-            put(SCENARIO_TOPICS['odometry'],
-                odometry_msg(T, t, ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i], vx=ego.speed[i],
-                             yaw_rate=rate[i], frame_id=fx, child_frame_id=base), t)
-            for s, it in frames.items():
-                stamp, d = next(it)
-                ts = t0 + stamp
-                if s == 'raw':
-                    sx, sy, syaw = _compose((ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i]), mount)
-                    c, sn = math.cos(syaw), math.sin(syaw)
-                    dx, dy = d.xy[:, 0] - sx, d.xy[:, 1] - sy
-                    local = np.stack([c * dx + sn * dy, -sn * dx + c * dy], axis=1)
-                    put(SCENARIO_TOPICS['radar'],
-                        radar_cloud_msg(T, make_header(T, radar, ts), local, d.doppler, d.rcs), ts)
-                elif s == 'tracked':
-                    args = (make_header(T, fx, ts), d.track_id, d.xy, d.heading, d.speed, d.label)
-                    put(SCENARIO_TOPICS['objects'], tracked_object_array_msg(T, *args), ts)
-                    if autoware:
-                        put(SCENARIO_TOPICS['autoware'], autoware_tracked_objects_msg(T, *args), ts)
-                elif s == 'heading':
-                    put(SCENARIO_TOPICS['detections'],
-                        pose_array_msg(T, make_header(T, fx, ts), d.xy, d.heading), ts)
     info.size = sum(f.stat().st_size for f in Path(path).iterdir())
     return info
+
+
+def _to_sensor(xy, ego_pose, mount) -> np.ndarray:
+    """Fixed-frame points (N, 2) -> the frame of a sensor mounted on the ego."""
+    sx, sy, syaw = _compose(ego_pose, mount)
+    c, s = math.cos(syaw), math.sin(syaw)
+    dx, dy = xy[:, 0] - sx, xy[:, 1] - sy
+    return np.stack([c * dx + s * dy, -s * dx + c * dy], axis=1)
 
 
 def _compose(pose, mount):

@@ -282,3 +282,15 @@ def test_core_and_adapters_do_not_import_rclpy():
             'intersection_estimator.bagio.typestore(); '
             'assert "rclpy" not in sys.modules, "rclpy imported"')
     subprocess.run([sys.executable, '-c', code], check=True, cwd=str(pathlib.Path(__file__).parents[1]))
+
+
+def test_scenario_messages_rclpy_time_ordered(scenario):
+    from msg_adapters.types import RclpyTypes
+    from nav_msgs.msg import Odometry
+    msgs = list(bagio.scenario_messages(scenario, RclpyTypes(), sensors=('tracked',), autoware=False))
+    assert msgs[0][1] == SCENARIO_TOPICS['tf_static']
+    ts = [t for t, _, _ in msgs]
+    assert ts == sorted(ts)
+    odo = [m for _, topic, m in msgs if topic == SCENARIO_TOPICS['odometry']]
+    assert len(odo) == len(scenario.ego.t) and isinstance(odo[0], Odometry)
+    assert {topic for _, topic, _ in msgs} == {SCENARIO_TOPICS[k] for k in ('tf_static', 'odometry', 'objects')}
