@@ -765,7 +765,8 @@ def scenario_messages(scenario, types, sensors=('tracked', 'raw', 'heading'), au
     """``(t, topic, msg)`` of a simulated scenario in time order, messages built with ``types``.
 
     What :func:`write_scenario_bag` records (see there), also usable without a bag (soak,
-    DDS tests with ``RclpyTypes``). ``mount`` defaults to :func:`scenario_mount`.
+    DDS tests with ``RclpyTypes``; there ``/tf_static`` is left out when ``tf2_msgs`` is not
+    importable). ``mount`` defaults to :func:`scenario_mount`.
     """
     from msg_adapters.odometry import odometry_msg
     from msg_adapters.pointcloud2 import radar_cloud_msg
@@ -778,8 +779,11 @@ def scenario_messages(scenario, types, sensors=('tracked', 'raw', 'heading'), au
     mount = scenario_mount(scenario) if mount is None else mount
     frames = {s: scenario.frames(s) for s in sensors}
     rate = _yaw_rate(ego.t, ego.yaw)
-    yield t0 + float(ego.t[0]), SCENARIO_TOPICS['tf_static'], _tf_static(
-        types, t0 + float(ego.t[0]), base, radar, mount)
+    try:
+        yield t0 + float(ego.t[0]), SCENARIO_TOPICS['tf_static'], _tf_static(
+            types, t0 + float(ego.t[0]), base, radar, mount)
+    except ImportError:   # rclpy namespace without tf2_msgs (no wheel): no /tf_static
+        pass
     for i, te in enumerate(ego.t):
         t = t0 + float(te)
         yield t, SCENARIO_TOPICS['odometry'], odometry_msg(
