@@ -199,8 +199,8 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
 def _fmt(v, kind):
     if v is None:
         return '-'
-    return {'pct': f'{100 * v:.2f} %', 'pct0': f'{100 * v:.0f} %', 'm': f'{v:.2f}', 'deg': f'{v:.2f}', 'cm': f'{v:.1f}',
-            'ms': f'{v:.1f}'}[kind]
+    return {'pct': f'{100 * v:.2f} %', 'pct0': f'{100 * v:.0f} %', 'm': f'{v:.2f}',
+            'deg': f'{v:.2f}', 'cm': f'{v:.1f}', 'ms': f'{v:.1f}'}[kind]
 
 
 def format_table(result: dict) -> str:

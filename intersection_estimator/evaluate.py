@@ -99,6 +99,12 @@ def _as_dict(x) -> dict:
     raise Malformed(f'expected an estimate.json object, got {type(x).__name__}')
 
 
+def _arm(a, what) -> list:
+    return [math.radians(_num(_get(a, 'angle_deg', what), f'{what}.angle_deg')),
+            _int(_get(a, 'lanes_in', what), f'{what}.lanes_in'),
+            _int(_get(a, 'lanes_out', what), f'{what}.lanes_out')]
+
+
 def _parse(d, name):
     """-> center (2,), arms (n, 3) [angle rad, lanes_in, lanes_out], lanes list of dicts."""
     d = _as_dict(d)
@@ -106,11 +112,8 @@ def _parse(d, name):
     arms_in = _get(d, 'arms', name)
     if not isinstance(arms_in, list):
         raise Malformed(f'{name}.arms: expected a list')
-    arms = np.array([[math.radians(_num(_get(a, 'angle_deg', f'{name}.arms[{i}]'),
-                                       f'{name}.arms[{i}].angle_deg')),
-                      _int(_get(a, 'lanes_in', f'{name}.arms[{i}]'), f'{name}.arms[{i}].lanes_in'),
-                      _int(_get(a, 'lanes_out', f'{name}.arms[{i}]'), f'{name}.arms[{i}].lanes_out')]
-                     for i, a in enumerate(arms_in)], dtype=float).reshape(-1, 3)
+    arms = np.array([_arm(a, f'{name}.arms[{i}]') for i, a in enumerate(arms_in)],
+                    dtype=float).reshape(-1, 3)
     lanes_in = _get(d, 'lanes', name)
     if not isinstance(lanes_in, list):
         raise Malformed(f'{name}.lanes: expected a list')

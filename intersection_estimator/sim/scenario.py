@@ -20,9 +20,6 @@ from .config import SimConfig
 __all__ = ['random_intersection', 'stop_distances', 'connector_pairs', 'build_lanelets',
            'lane_id', 'connector_id']
 
-_STRAIGHT_DEG = 30.0  # |turn| below this is 'straight' (only used for ordering ties)
-
-
 def lane_id(arm: int, direction: int, k: int) -> str:
     return f'a{arm}_{"in" if direction == ENTERING else "out"}{k}'
 
@@ -69,7 +66,7 @@ def _corner_distance(hw_i: float, hw_j: float, theta: float, radius: float) -> f
 
 
 def stop_distances(rng: np.random.Generator, inter: Intersection, cfg: SimConfig) -> np.ndarray:
-    """Stop-line distance per arm: clear of both neighbours' rounded corners plus a random margin."""
+    """Stop-line distance per arm: clear of both neighbours' rounded corners + random margin."""
     arms = inter.arms
     n = len(arms)
     hw = np.array([a.half_width() for a in arms])
@@ -185,7 +182,7 @@ def _connector(inter, a, k_in, b, k_out, lin: Lanelet, lout: Lanelet, spacing) -
 
 def build_lanelets(rng: np.random.Generator, inter: Intersection, cfg: SimConfig,
                    stop: np.ndarray) -> list[Lanelet]:
-    """Entering, leaving and connector lanelets with successors (entering -> connector -> leaving)."""
+    """Entering, leaving and connector lanelets; successors entering -> connector -> leaving."""
     lanes: dict[str, Lanelet] = {}
     for a, arm in enumerate(inter.arms):
         length = float(rng.uniform(*cfg.arm_length))

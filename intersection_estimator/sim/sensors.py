@@ -63,7 +63,7 @@ def _visible(xy, cyc, sensor_xy, rng_m):
     return np.linalg.norm(xy - sensor_xy[cyc], axis=1) <= rng_m
 
 
-def _tracked(rng, truth, sens, center, cfg, n_cyc):
+def _tracked(rng, truth, sens, center, cfg, n_cyc):  # noqa: ARG001 - common signature
     cyc, vid, xy, yaw, sp = truth
     hn = math.radians(cfg.heading_noise_deg)
     n = len(cyc)

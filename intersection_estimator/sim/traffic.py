@@ -167,8 +167,8 @@ def make_ego(rng: np.random.Generator, inter: Intersection, lanelets: list[Lanel
     tb = np.clip(t - t_brake, 0.0, v0 / b)
     dist = v0 * np.minimum(t, t_brake) + v0 * tb - 0.5 * b * tb ** 2  # travelled [m]
     speed = np.where(t < t_brake, v0, np.maximum(v0 - b * (t - t_brake), 0.0))
-    stop_pt = lane.center[-1] - float(rng.uniform(*cfg.ego_stop_gap)) * (-inter.arms[lane.arm].direction)
     heading = -inter.arms[lane.arm].direction
+    stop_pt = lane.center[-1] - float(rng.uniform(*cfg.ego_stop_gap)) * heading
     xy = stop_pt - (dist[-1] - dist)[:, None] * heading
     yaw = np.full(len(t), float(np.arctan2(heading[1], heading[0])))
     return EgoTrajectory(t=t, xy=xy, yaw=yaw, speed=speed, arm=lane.arm, lane_index=lane.lane_index)
