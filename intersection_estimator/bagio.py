@@ -276,7 +276,8 @@ class _Bag:
                 problem = err
         if times:
             self.span = (min(times), max(times))
-        self.problem = problem or BagError('corrupt', f'index unreadable ({exc}); read by scanning', self.path)
+        self.problem = problem or BagError('corrupt', f'index unreadable ({exc}); read by scanning',
+                                           self.path)
         if not channels:
             raise BagError(self.problem.reason, f'{self.problem.message}; no readable channel', self.path)
         self._schemas, self._channels = schemas, channels
@@ -603,7 +604,8 @@ def _scan_mcap(path: Path) -> Iterator[tuple]:
         try:
             yield from _record(op, body, n, path)
         except _Buf.Short:
-            raise BagError('corrupt', f'record 0x{op:02x} at byte {start} shorter than its fields', path) from None
+            raise BagError('corrupt', f'record 0x{op:02x} at byte {start} shorter than its fields',
+                           path) from None
     raise BagError('truncated', f'file ends after {len(data)} bytes without an MCAP footer', path)
 
 

@@ -73,8 +73,8 @@ def _column_dtype(name, spec, point_step, order):
         raise AdapterError('unknown_datatype', f'field {name!r} has datatype {datatype}')
     dt = np.dtype(order + code)
     if offset < 0 or offset + dt.itemsize > point_step:
-        raise AdapterError('field_overflow',
-                           f'field {name!r} at offset {offset} (+{dt.itemsize}) beyond point_step {point_step}')
+        raise AdapterError('field_overflow', f'field {name!r} at offset {offset} (+{dt.itemsize}) '
+                                             f'beyond point_step {point_step}')
     return dt
 
 
@@ -95,7 +95,8 @@ def _layout(msg, max_points):
     stride = row_step if row_step >= width * step else width * step
     need = stride * (height - 1) + width * step
     if need > len(data):
-        raise AdapterError('truncated', f'{height}x{width} points of {step} B need {need} B, data has {len(data)} B')
+        raise AdapterError('truncated', f'{height}x{width} points of {step} B need {need} B, '
+                                        f'data has {len(data)} B')
     return height, width, step, stride, data
 
 

@@ -48,8 +48,9 @@ _AVAILABLE = 2
 
 @dataclass
 class ObjectList:
-    """Objects in the message frame: ids int64 (>= 0; -1 without identity), xy (N, 2), yaw = heading (N,) [rad,
-    NaN unknown], speed (N,) [m/s], label int16 (Autoware ids), existence (N,) in [0, 1]."""
+    """Objects in the message frame: ids int64 (>= 0; -1 without identity), xy (N, 2),
+    yaw = heading (N,) [rad, NaN unknown], speed (N,) [m/s], label int16 (Autoware ids),
+    existence (N,) in [0, 1]."""
 
     frame_id: str
     stamp: float
@@ -119,10 +120,12 @@ def _autoware_row(o, family):
     k = o.kinematics
     if family == 'autoware_predicted':  # PredictedObjects: id (old) or object_id (current)
         uuid = getattr(o, 'object_id', None) or o.id
-        pose, twist, avail = k.initial_pose_with_covariance.pose, k.initial_twist_with_covariance.twist, _AVAILABLE
+        pose, twist = k.initial_pose_with_covariance.pose, k.initial_twist_with_covariance.twist
+        avail = _AVAILABLE
     else:
         uuid = getattr(o, 'object_id', None)
-        pose, twist, avail = k.pose_with_covariance.pose, k.twist_with_covariance.twist, k.orientation_availability
+        pose, twist = k.pose_with_covariance.pose, k.twist_with_covariance.twist
+        avail = k.orientation_availability
     oid = uuid_to_id(uuid.uuid) if uuid is not None else -1
     v = twist.linear
     return (oid, *_pose_row(pose), v.x, v.y, _best_label(o.classification),

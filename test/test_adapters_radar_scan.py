@@ -41,7 +41,8 @@ def test_doppler_sign_and_non_finite_returns():
     msg = NS(header=NS(frame_id='/radar', stamp=NS(sec=1, nanosec=0)),
              returns=[NS(range=1.0, azimuth=0.0, elevation=0.0, doppler_velocity=2.0, amplitude=1.0),
                       NS(range=float('nan'), azimuth=0.0, elevation=0.0, doppler_velocity=2.0, amplitude=1.0),
-                      NS(range=1.0, azimuth=0.0, elevation=0.0, doppler_velocity=float('inf'), amplitude=1.0)])
+                      NS(range=1.0, azimuth=0.0, elevation=0.0, doppler_velocity=float('inf'),
+                         amplitude=1.0)])
     res = read_radar_scan(msg, doppler_sign=-1)
     assert res.frame_id == 'radar' and len(res) == 1 and res.dropped == 2
     assert res.doppler[0] == -2.0

@@ -17,7 +17,8 @@ def test_full_name():
 def test_rosbags_defaults_and_conversions():
     ts = typestore()
     T = RosbagsTypes(ts)
-    m = T.get('visualization_msgs/Marker')(ns='a', id=np.int64(3), scale=T.get('geometry_msgs/msg/Vector3')(x=1))
+    scale = T.get('geometry_msgs/msg/Vector3')(x=1)
+    m = T.get('visualization_msgs/Marker')(ns='a', id=np.int64(3), scale=scale)
     assert m.id == 3 and type(m.id) is int and m.text == '' and m.points == []
     assert m.pose.orientation.w == 0.0 and isinstance(m.header.stamp.sec, int)
     ts.serialize_cdr(m, 'visualization_msgs/msg/Marker')         # every field present and typed

@@ -177,7 +177,8 @@ def test_detect_topics_by_type_and_doppler_field(tmp_path):
         lidar = radar_cloud_msg(T, make_header(T, 'lidar', 1.0), [[1.0, 2.0]], [1.0])
         lidar.fields = lidar.fields[:3]
         w.write('/lidar/points', lidar, 1.0)
-        w.write('/sensing/radar/empty', radar_cloud_msg(T, make_header(T, 'r', 1.0), np.zeros((0, 3)), []), 1.0)
+        empty = radar_cloud_msg(T, make_header(T, 'r', 1.0), np.zeros((0, 3)), [])
+        w.write('/sensing/radar/empty', empty, 1.0)
         w.write('/vehicle/odom', odometry_msg(T, 1.0, 0, 0, 0), 1.0)
         w.write('/localization/kinematic_state', odometry_msg(T, 1.0, 0, 0, 0), 1.0)
     with open_bags(tmp_path / 'mixed') as bags:
@@ -199,7 +200,8 @@ def test_three_object_families_through_a_bag(tmp_path):
         w.write('/derived', derived_object_array_msg(T, h, ids, xy, yaw, speed, [1, 2]), 2.0)
     with open_bags(tmp_path / 'objs') as bags:
         got = {m.topic: read_objects(m.msg) for m in bags.messages()}
-    assert {t: o.family for t, o in got.items()} == {'/ours': 'ours', '/aw': 'autoware', '/derived': 'derived'}
+    families = {t: o.family for t, o in got.items()}
+    assert families == {'/ours': 'ours', '/aw': 'autoware', '/derived': 'derived'}
     for topic, o in got.items():
         np.testing.assert_array_equal(o.ids, ids)
         np.testing.assert_allclose(o.xy, xy)
@@ -260,7 +262,8 @@ def test_output_bag_latched_markers_readable_by_mcap(scenario, tmp_path):
         h = make_header(T, 'map', 3.0)
         w.write('/intersection_estimator/topology', topology_msg(T, h, scenario.gt, 10, -1.0, 5, 1), 3.0)
         w.write('/intersection_estimator/lanelets', lanelets_msg(T, h, scenario.gt_lanelets, 7), 3.0)
-        w.write('/intersection_estimator/markers', markers_msg(T, h, scenario.gt, scenario.gt_lanelets)[0], 3.0)
+        markers, _ = markers_msg(T, h, scenario.gt, scenario.gt_lanelets)
+        w.write('/intersection_estimator/markers', markers, 3.0)
     meta = (tmp_path / 'out' / 'metadata.yaml').read_text()
     assert meta.count('transient_local') == 1
     with open_bags(tmp_path / 'out') as bags:
