@@ -56,7 +56,7 @@ def as_u8(data) -> np.ndarray:
     """A message's ``uint8[]`` (numpy array, array.array, bytes or list) as a uint8 view."""
     if isinstance(data, np.ndarray):
         if data.dtype == np.uint8:
-            return data.reshape(-1)
+            return np.ascontiguousarray(data).reshape(-1)
         return np.asarray(data).astype(np.uint8).reshape(-1)
     if isinstance(data, (bytes, bytearray, memoryview)) or hasattr(data, 'typecode'):
         return np.frombuffer(memoryview(data).cast('B'), dtype=np.uint8)

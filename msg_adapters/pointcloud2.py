@@ -4,7 +4,8 @@ Reading accepts any layout a driver may produce: fields in any order and at any 
 datatypes INT8..FLOAT64 (``sensor_msgs/PointField`` constants), ``count > 1`` (the first
 element is used), either endianness, ``point_step`` with padding, ``row_step`` with row
 padding and ``height > 1``. Only the fields that are read must be valid; others are
-ignored. Doppler is looked up under its common names; its sign is configurable
+ignored; a ``row_step`` smaller than ``width * point_step`` (drivers that leave it 0) is
+read as unpadded rows. Doppler is looked up under its common names; its sign is configurable
 (``doppler_sign=-1`` for drivers where positive = approaching). The result is always
 "positive = moving away from the sensor".
 """
