@@ -54,6 +54,7 @@ _RANGES = {
     'refine_init': (0, 1, 'penalised least-squares refinement of the initialisation'),
     'refine_smooth': (0.0, 1e6, 'weight of the second-difference penalty of the refinement'),
     'refine_smooth_connector': (0.0, 1e6, 'second-difference weight inside connectors'),
+    'refine_keep_shape': (0, 1, '1: penalise second differences relative to the initial shape'),
     'refine_jerk': (0.0, 1e6, 'weight of the third-difference penalty of the refinement'),
     'refine_width': (0.0, 1e6, 'weight pulling lane widths to their topology width'),
     'refine_iters': (1, 50, 'Gauss-Newton iterations of the refinement'),
@@ -105,10 +106,11 @@ class LaneConfig:
     temp_start: float = 1.0
     temp_end: float = 0.05
     anneal_samples: int = 20000
-    refine: int = 1
-    refine_init: int = 1
+    refine: int = 0
+    refine_init: int = 0
     refine_smooth: float = 20.0
     refine_smooth_connector: float = 1.0
+    refine_keep_shape: int = 1
     refine_jerk: float = 0.0
     refine_width: float = 1.0
     refine_iters: int = 4

@@ -138,13 +138,18 @@ class LaneCourseEstimator:
             return
         g = self.graph
         self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
-        self._setup_likelihood()
+        if cfg.refine_init:
+            self._setup_likelihood()
         if cfg.refine_init and len(self._Q):
             self._refine(assign=True)
             for i, s in enumerate(g.specs):
                 if s.kind == 'connector':
                     _respace(g, i)
             self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
+        C = g.centers()
+        self._d2_0 = np.zeros_like(C)
+        h = np.flatnonzero((g.prev_st >= 0) & (g.next_st >= 0))
+        self._d2_0[h] = C[g.prev_st[h]] - 2 * C[h] + C[g.next_st[h]]
         extra = _connector_pairs(g, cfg.merge_radius)
         if extra:
             g.pair_a = np.concatenate([g.pair_a, [a for a, _ in extra]]).astype(np.int64)
@@ -215,7 +220,8 @@ class LaneCourseEstimator:
                        smooth_connector=cfg.refine_smooth_connector, jerk=cfg.refine_jerk,
                        width=cfg.refine_width,
                        iters=cfg.refine_iters, huber=cfg.refine_huber,
-                       assign=self._assign if assign else None)
+                       assign=self._assign if assign else None,
+                       d2_ref=self._d2_0 if cfg.refine_keep_shape else None)
 
     # ------------------------------------------------------------------ sampling
     def _params(self) -> np.ndarray:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
+from numba import njit
 
 from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
@@ -100,6 +101,41 @@ def _lane_rays(topo: Intersection, frames=None):
             yield ai, k, d, f.origin, f.u, f.n, lat
 
 
+@njit(cache=True)
+def _assign_nb(pts, tptr, split, r_arm, r_dir, r_o, r_u, r_n, r_lat, stops, inside, min_pts,
+               min_len, gate, out_in, out_out):
+    """Best ray per trajectory part (see :func:`assign_parts`); -1 where none qualifies."""
+    for i in range(len(tptr) - 1):
+        a0, a1, sp = tptr[i], tptr[i + 1], tptr[i] + split[i]
+        for part in range(2):
+            lo, hi = (a0, sp + 1) if part == 0 else (sp, a1)
+            d = 1 if part == 0 else -1
+            best, lane = gate, -1
+            if hi - lo >= max(2, min_pts):
+                for r in range(len(r_arm)):
+                    if r_dir[r] != d:
+                        continue
+                    cnt, first, last, lat = 0, 0.0, 0.0, 0.0
+                    for q in range(lo, hi):
+                        rx, ry = pts[q, 0] - r_o[r, 0], pts[q, 1] - r_o[r, 1]
+                        s = rx * r_u[r, 0] + ry * r_u[r, 1]
+                        if s > stops[r_arm[r]] - inside:
+                            if cnt == 0:
+                                first = s
+                            last = s
+                            lat += rx * r_n[r, 0] + ry * r_n[r, 1]
+                            cnt += 1
+                    if cnt < min_pts or (last - first) * (-d) < min_len:
+                        continue
+                    dist = abs(lat / cnt - r_lat[r])
+                    if dist < best:
+                        best, lane = dist, r
+            if part == 0:
+                out_in[i] = lane
+            else:
+                out_out[i] = lane
+
+
 def assign_parts(trajs: list[Trajectory], topo: Intersection, cfg: LaneConfig,
                  stops: np.ndarray | None = None, frames=None) -> None:
     """Split every trajectory and assign its parts to lanes (paper §III-A).
@@ -110,38 +146,29 @@ def assign_parts(trajs: list[Trajectory], topo: Intersection, cfg: LaneConfig,
     part must head the lane's way and have ``min_part_points`` points there spanning
     at least ``min_part_length`` metres.
     """
-    c = topo.center
     if stops is None:
         stops = stop_distances(topo, cfg)
     rays = list(_lane_rays(topo, frames))
     for tr in trajs:
         tr.lane_in = tr.lane_out = None
-        if len(tr.xy) < 2 or not rays:
-            continue
-        tr.split = split_at_center(tr.xy, c)
-        for d, part in ((ENTERING, tr.xy[:tr.split + 1]), (LEAVING, tr.xy[tr.split:])):
-            if len(part) < max(2, cfg.min_part_points):
-                continue
-            best, lane = cfg.assign_gate, None
-            for ai, k, dd, o, u, n, off in rays:
-                if dd != d:
-                    continue
-                rel = part - o
-                s = rel @ u
-                sel = s > stops[ai] - cfg.assign_inside
-                if sel.sum() < cfg.min_part_points:
-                    continue
-                ss = s[sel]
-                heading = (ss[-1] - ss[0]) * (-1.0 if d == ENTERING else 1.0)
-                if heading < cfg.min_part_length:
-                    continue
-                dist = abs(float(np.mean(rel[sel] @ n)) - off)
-                if dist < best:
-                    best, lane = dist, (ai, k)
-            if d == ENTERING:
-                tr.lane_in = lane
-            else:
-                tr.lane_out = lane
+        tr.split = split_at_center(tr.xy, topo.center) if len(tr.xy) else 0
+    if not rays or not trajs:
+        return
+    pts = np.ascontiguousarray(np.concatenate([tr.xy for tr in trajs]), dtype=float)
+    tptr = np.concatenate([[0], np.cumsum([len(tr.xy) for tr in trajs])]).astype(np.int64)
+    split = np.array([tr.split for tr in trajs], np.int64)
+    r_arm = np.array([r[0] for r in rays], np.int64)
+    r_dir = np.array([r[2] for r in rays], np.int64)
+    r_o, r_u, r_n = (np.array([r[i] for r in rays], float) for i in (3, 4, 5))
+    r_lat = np.array([r[6] for r in rays], float)
+    li = np.full(len(trajs), -1, np.int64)
+    lo = np.full(len(trajs), -1, np.int64)
+    _assign_nb(pts, tptr, split, r_arm, r_dir, r_o, r_u, r_n, r_lat,
+               np.asarray(stops, float), cfg.assign_inside, cfg.min_part_points,
+               cfg.min_part_length, cfg.assign_gate, li, lo)
+    for tr, a, b in zip(trajs, li, lo):
+        tr.lane_in = (int(r_arm[a]), rays[a][1]) if a >= 0 else None
+        tr.lane_out = (int(r_arm[b]), rays[b][1]) if b >= 0 else None
 
 
 def lane_id(arm: int, direction: int, k: int) -> str:
@@ -313,7 +340,7 @@ def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
     L0, R0, L1, R1 = E.left[-1], E.right[-1], O.left[0], O.right[0]
     c0, c1 = 0.5 * (L0 + R0), 0.5 * (L1 + R1)
     chord = float(np.linalg.norm(c1 - c0))
-    s = np.linspace(0.0, 1.0, 200)
+    s = np.linspace(0.0, 1.0, 64)
     if cfg.connector_hermite and len(E.left) >= 2 and len(O.left) >= 2:
         t0 = 0.5 * (E.left[-1] + E.right[-1]) - 0.5 * (E.left[-2] + E.right[-2])
         t1 = 0.5 * (O.left[1] + O.right[1]) - 0.5 * (O.left[0] + O.right[0])

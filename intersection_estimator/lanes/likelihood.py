@@ -5,7 +5,7 @@ leaving lanelet), so the sum over lanes ``sum_l 1(t_i, l)`` has one term and
 
     log P(t_i | I_2) = sum_{p in t_i} log N(d_perp(p, M_l); 0, sigma_perp)
 
-with ``M_l`` the center line of the sequence. Each point keeps a window of three
+with ``M_l`` the center line of the sequence. Each point keeps a window of two
 center-line segments around its nearest one (``win_lo``..``win_hi`` stations), so a
 move re-scores only the points whose window touches a changed center point.
 Points farther than ``point_gate`` from their sequence are dropped at assignment; an
@@ -80,26 +80,35 @@ def station_csr(n_stations: int, lo: np.ndarray, hi: np.ndarray):
 def _assign_nb(C, st_off, st_n, tptr, pts, lptr, lanes, gate2, lo, hi, ll, keep):
     for i in range(len(tptr) - 1):
         for q in range(tptr[i], tptr[i + 1]):
+            px, py = pts[q, 0], pts[q, 1]
             best, bl, bg = gate2, -1, -1
             for j in range(lptr[i], lptr[i + 1]):
                 l = lanes[j]
                 for g in range(st_off[l], st_off[l] + st_n[l] - 1):
-                    d = seg_dist2(pts[q, 0], pts[q, 1], C[g, 0], C[g, 1], C[g + 1, 0], C[g + 1, 1])
+                    d = seg_dist2(px, py, C[g, 0], C[g, 1], C[g + 1, 0], C[g + 1, 1])
                     if d < best:
                         best, bl, bg = d, l, g
-            if bl >= 0:
-                keep[q] = True
-                lo[q] = max(st_off[bl], bg - 1)
-                hi[q] = min(st_off[bl] + st_n[bl] - 1, bg + 2)
-                ll[q] = bl
+            if bl < 0:
+                continue
+            keep[q] = True
+            ll[q] = bl
+            # two segments: the nearest and its neighbour on the side of the foot point
+            dx, dy = C[bg + 1, 0] - C[bg, 0], C[bg + 1, 1] - C[bg, 1]
+            t = ((px - C[bg, 0]) * dx + (py - C[bg, 1]) * dy) / max(dx * dx + dy * dy, 1e-18)
+            first, last = st_off[bl], st_off[bl] + st_n[bl] - 1
+            a = bg - 1 if t < 0.5 else bg
+            a = max(first, min(a, last - 2))
+            lo[q] = a
+            hi[q] = min(last, a + 2)
 
 
 def assign_points(C: np.ndarray, st_off, st_n, seqs: list, gate: float):
     """Nearest segment of each trajectory point within its lane sequence.
 
     ``seqs``: list of (points (m, 2), [lanelet indices]). Returns the kept points
-    ``Q`` (k, 2), their window ``win_lo``/``win_hi`` (global station indices, three
-    segments around the nearest, clipped to the lanelet) and lanelet ``q_ll``.
+    ``Q`` (k, 2), their window ``win_lo``/``win_hi`` (global station indices: the
+    nearest segment and its neighbour towards the foot point, within the lanelet) and
+    lanelet ``q_ll``.
     """
     seqs = [(p, l) for p, l in seqs if len(p) and len(l)]
     if not seqs:

@@ -33,7 +33,7 @@ class LaneletSpec:
     """Geometry and sharing keys of one lanelet before it enters the graph.
 
     ``left_keys``/``right_keys``: per station a hashable key of a point shared for
-    good, or ``None`` for a point of its own.
+    good, or ``None`` for a point of its own (only end stations may carry keys).
     """
 
     id: str
@@ -139,24 +139,25 @@ def build_graph(specs: list[LaneletSpec], pairs: list[tuple], users_cap: int = 0
     n_total = int(n_st.sum())
     g.st_ll = np.repeat(np.arange(len(specs)), n_st).astype(np.int64)
     g.kind_code = np.array([_KIND[s.kind] for s in specs], np.int64)
-    pts, axes, keyed = [], [], {}
-    ref = np.empty(2 * n_total, np.int64)
-    normal = np.zeros((n_total, 2))
+    # one point per slot (slot 2g = left, 2g + 1 = right of station g); slots with a
+    # sharing key then reference the first point of that key (the others stay unused)
+    L = np.concatenate([s.left for s in specs]).reshape(-1, 2) if specs else np.zeros((0, 2))
+    R = np.concatenate([s.right for s in specs]).reshape(-1, 2) if specs else np.zeros((0, 2))
+    normal = np.concatenate([_unit_normal(s.left, s.right) for s in specs]).reshape(-1, 2) \
+        if specs else np.zeros((0, 2))
+    pts = np.empty((2 * n_total, 2))
+    pts[0::2], pts[1::2] = L, R
+    axes = np.repeat(normal, 2, axis=0)
+    ref = np.arange(2 * n_total, dtype=np.int64)
+    keyed: dict = {}
     for li, sp in enumerate(specs):
-        nrm = _unit_normal(sp.left, sp.right)
-        for i in range(len(sp.left)):
-            gi = g.st_off[li] + i
-            normal[gi] = nrm[i]
-            for side, (xy, key) in enumerate(((sp.left[i], sp.left_keys[i]),
-                                              (sp.right[i], sp.right_keys[i]))):
-                if key is not None and key in keyed:
-                    ref[2 * gi + side] = keyed[key]
-                    continue
-                ref[2 * gi + side] = len(pts)
+        o = g.st_off[li]
+        for side, keys in ((0, sp.left_keys), (1, sp.right_keys)):
+            for i in (0, len(keys) - 1) if len(keys) else ():
+                key = keys[i]
                 if key is not None:
-                    keyed[key] = len(pts)
-                pts.append(np.asarray(xy, float))
-                axes.append(nrm[i])
+                    slot = 2 * (o + i) + side
+                    ref[slot] = keyed.setdefault(key, slot)
     g.P = np.array(pts, float).reshape(-1, 2)
     g.axis = np.array(axes, float).reshape(-1, 2)
     g.home = ref.copy()

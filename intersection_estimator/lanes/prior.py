@@ -48,13 +48,10 @@ def log_prior(delta, inv2sd2, tau, n_shared):
 def angle_csr(prev_st: np.ndarray, next_st: np.ndarray):
     """CSR (ptr, idx): for each station the stations whose angle uses its center."""
     n = len(prev_st)
-    lists = [[] for _ in range(n)]
-    for h in range(n):
-        if prev_st[h] < 0 or next_st[h] < 0:
-            continue
-        for g in (h, prev_st[h], next_st[h]):
-            lists[g].append(h)
+    h = np.flatnonzero((prev_st >= 0) & (next_st >= 0))
+    src = np.concatenate([h, prev_st[h], next_st[h]])
+    dst = np.concatenate([h, h, h])
+    order = np.argsort(src, kind='stable')
     ptr = np.zeros(n + 1, np.int64)
-    ptr[1:] = np.cumsum([len(x) for x in lists])
-    idx = np.array([h for x in lists for h in x], np.int64)
-    return ptr, idx
+    ptr[1:] = np.cumsum(np.bincount(src, minlength=n))
+    return ptr, dst[order].astype(np.int64)

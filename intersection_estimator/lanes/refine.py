@@ -7,7 +7,7 @@ of all border points along their axes (shared points are one unknown, so shared
 borders stay shared); the objective is
 
     sum_q  w_q (d_perp(q) / sigma)^2                        trajectory points
-  + refine_smooth * sum_h |c_prev(h) - 2 c_h + c_next(h)|^2  second differences
+  + refine_smooth * sum_h |c_prev(h) - 2 c_h + c_next(h) - D0_h|^2  second differences
   + refine_width  * sum_g (width_g - width0_g)^2              lane width
 
 with Huber weights ``w_q`` (iteratively reweighted) and Gauss-Newton iterations that
@@ -30,7 +30,7 @@ def nearest_in_window(C, Q, lo, hi):
     bg = lo.copy()
     bt = np.zeros(len(Q))
     for k in range(3):
-        g = lo + k
+        g = lo + k  # windows have two (formerly three) segments; extra k is masked
         ok = g < hi
         gg = np.where(ok, g, lo)
         a, b = C[gg], C[np.minimum(gg + 1, len(C) - 1)]
@@ -73,11 +73,13 @@ def _difference_rows(blocks, rhs, stations, half_coefs, s, D, ref, axis, var, n_
 
 
 def refine_offsets(graph, Q, lo, hi, width0, *, sigma=1.0, smooth=20.0, smooth_connector=1.0,
-                   jerk=0.0, width=1.0, iters=4, huber=2.0, assign=None):
+                   jerk=0.0, width=1.0, iters=4, huber=2.0, assign=None, d2_ref=None):
     """Gauss-Newton / IRLS over the lateral point offsets; modifies ``graph.P`` in place.
 
     ``assign``: optional callable returning fresh (Q, lo, hi) after each iteration
     (used by the initialisation, whose connectors move far from their start).
+    ``d2_ref``: per-station second differences of a reference shape; the penalty is
+    then on the deviation from it (the connectors' arc prior is not pulled straight).
     """
     ref, axis = graph.ref, graph.axis
     used = np.unique(ref)
@@ -112,6 +114,8 @@ def refine_offsets(graph, Q, lo, hi, width0, *, sigma=1.0, smooth=20.0, smooth_c
         if len(h) and lam.max() > 0:
             s = np.sqrt(lam)
             D = C[a_st] - 2 * C[h] + C[b_st]
+            if d2_ref is not None:
+                D = D - d2_ref[h]
             _difference_rows(blocks, rhs, [a_st, h, b_st], [0.5, -1.0, 0.5], s, D, ref, axis,
                              var, n_var)
         if len(h3) and jerk > 0:

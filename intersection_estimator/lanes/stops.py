@@ -89,17 +89,20 @@ def fit_stops(topo, frames, trajs, stops0: np.ndarray, search: float, step: floa
     near = [t.xy[np.linalg.norm(t.xy - topo.center, axis=1) < radius] for t in rows]
     pptr = np.concatenate([[0], np.cumsum([len(x) for x in near])]).astype(np.int64)
     pts = np.concatenate(near) if pptr[-1] else np.zeros((0, 2))
-    grid = np.arange(-search, search + 1e-9, step)
+    coarse = np.arange(-search, search + 1e-9, 4 * step)
+    fine = np.arange(-1.5 * step * 2, 1.5 * step * 2 + 1e-9, step)
     for _ in range(sweeps):
         for a in range(len(arms)):
             sel = np.flatnonzero(((arm_in == a) | (arm_out == a)) & (arm_in != arm_out))
             if not len(sel):
                 continue
-            base = stops0[a]
-            costs = []
-            for d in grid:
-                stops[a] = base + d
-                costs.append(path_cost(stops, arm_in, off_in, arm_out, off_out, pptr, pts,
-                                       O, U, N, sel.astype(np.int64), clip * clip))
-            stops[a] = base + grid[int(np.argmin(costs))]
+            sel = sel.astype(np.int64)
+
+            def cost(v):
+                stops[a] = v
+                return path_cost(stops, arm_in, off_in, arm_out, off_out, pptr, pts, O, U, N,
+                                 sel, clip * clip)
+            lo, hi = stops0[a] - search, stops0[a] + search
+            best = min(stops0[a] + coarse, key=cost)                  # coarse grid, then
+            stops[a] = min(np.clip(best + fine, lo, hi), key=cost)    # refine around it
     return stops
