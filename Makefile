@@ -54,8 +54,10 @@ $(STAMP)/package: $(PKG_SRC) $(STAMP)/msgs
 demo: setup
 	$(VENV)/bin/intersection-estimator demo
 
+# The whole suite, then the same package built and tested through colcon (as on a ROS machine).
 test: setup
 	ROS_HOME=$$(mktemp -d) $(PY) -m pytest test $(PYTEST_ARGS)
+	$(MAKE) --no-print-directory colcon-test
 
 bench: setup
 	$(VENV)/bin/intersection-estimator bench --n 1000 --mode tracked --seed 0 --json bench_tracked.json

@@ -18,6 +18,7 @@ SUBCOMMANDS = (
     'intersection_estimator.sim.cli',      # simulate
     'intersection_estimator.evaluate',     # evaluate
     'intersection_estimator.bench',        # bench
+    'intersection_estimator.soak',         # soak
 )
 
 

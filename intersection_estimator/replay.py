@@ -80,6 +80,7 @@ def _values(params_file: str | None, seed: int | None, overrides: dict) -> dict:
 #: bagio's detected role -> the node's parameter (input role)
 _BAG_ROLES = {'radar_clouds': 'radar_topics', 'radar_scans': 'radar_scan_topics',
               'pose_arrays': 'detection_topics', 'tracked_objects': 'object_topics',
+              'detected_objects': 'object_topics',
               'odometry': 'odometry_topic'}
 
 

@@ -29,7 +29,7 @@ def _ros_env() -> dict:
         'ROS_LOG_DIR': os.path.join(home, 'log'),
         'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
         'FASTRTPS_DEFAULT_PROFILES_FILE': str(ROOT / 'config' / 'fastdds_localhost.xml'),
-        'AMENT_PREFIX_PATH': sys.prefix,
+        'AMENT_PREFIX_PATH': os.environ.get('AMENT_PREFIX_PATH') or sys.prefix,
         'PYTHONUNBUFFERED': '1',
     }
 
@@ -40,14 +40,21 @@ os.environ.update(ROS_ENV)
 
 
 def script(name: str) -> str:
-    """Path of an installed console script of this venv (``make setup`` installs them)."""
+    """Path of an installed console script, found where ``ros2 run`` looks first
+    (``<prefix>/lib/intersection_estimator/`` of the ament index: colcon, ROS installs),
+    then in this venv's ``bin/`` (``make setup``)."""
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+    try:
+        path = Path(get_package_prefix('intersection_estimator')) / 'lib' / 'intersection_estimator' / name
+        if path.exists():
+            return str(path)
+    except (PackageNotFoundError, ValueError):
+        pass
     path = Path(sys.prefix) / 'bin' / name
-    if not path.exists():
-        found = shutil.which(name)
-        if not found:
-            pytest.fail(f'console script {name!r} not installed: run `make setup`')
-        return found
-    return str(path)
+    found = str(path) if path.exists() else shutil.which(name)
+    if not found:
+        pytest.fail(f'console script {name!r} not installed: run `make setup`')
+    return found
 
 
 class NodeProcess:
