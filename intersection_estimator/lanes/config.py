@@ -16,6 +16,8 @@ _RANGES = {
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
     'stop_step': (0.01, 5.0, 'grid step of the stop-distance search [m]'),
+    'stop_clip': (0.1, 50.0, 'distances are clipped here in the stop-distance fit [m]'),
+    'stop_sweeps': (1, 20, 'coordinate-descent sweeps over the arms in the stop fit'),
     'refit_lanes': (0, 10, 'rounds of re-fitting arm directions and lane positions to the traffic '
                     'and re-assigning the trajectory parts'),
     'min_fit_points': (2, 10**6, 'fewest points to re-fit an arm direction'),
@@ -50,6 +52,7 @@ _RANGES = {
     'temp_start': (1e-4, 1e4, 'annealing temperature at sample 0'),
     'temp_end': (1e-4, 1e4, 'annealing temperature after anneal_samples'),
     'anneal_samples': (1, 10**9, 'length of the geometric annealing schedule'),
+    'keep_best': (0, 1, '1: end each run in the best state seen (MAP), 0: in the final state'),
     'refine': (0, 1, 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
     'refine_init': (0, 1, 'penalised least-squares refinement of the initialisation'),
     'refine_smooth': (0.0, 1e6, 'weight of the second-difference penalty of the refinement'),
@@ -73,6 +76,8 @@ class LaneConfig:
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25
+    stop_clip: float = 2.0
+    stop_sweeps: int = 2
     refit_lanes: int = 1
     min_fit_points: int = 20
     max_refit_angle_deg: float = 10.0
@@ -84,7 +89,7 @@ class LaneConfig:
     assign_inside: float = 0.0
     min_part_length: float = 5.0
     stop_min: float = 3.0
-    stop_max: float = 40.0
+    stop_max: float = 100.0
     min_part_points: int = 3
     assign_gate: float = 6.0
     min_connector_evidence: int = 1
@@ -96,16 +101,17 @@ class LaneConfig:
     width_min: float = 2.0
     width_max: float = 6.0
     merge_radius: float = 0.6
-    step_center: float = 0.15
-    step_border: float = 0.15
+    step_center: float = 0.05
+    step_border: float = 0.05
     split_max: float = 0.6
     p_center: float = 0.6
     p_border: float = 0.2
     p_split: float = 0.1
     p_merge: float = 0.1
-    temp_start: float = 1.0
-    temp_end: float = 0.05
+    temp_start: float = 0.05
+    temp_end: float = 0.02
     anneal_samples: int = 20000
+    keep_best: int = 1
     refine: int = 0
     refine_init: int = 0
     refine_smooth: float = 20.0

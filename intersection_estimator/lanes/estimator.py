@@ -107,6 +107,7 @@ class LaneCourseEstimator:
         self._key = None
         self._k = 0
         self.timings: dict = {}
+        self.last_chain = (0, 0.0, 0.0)   # (accepted, dlogP of final state, of best state)
 
     # ------------------------------------------------------------------ setup
     def initialise(self, topology: Intersection, dets: Detections | None) -> None:
@@ -121,7 +122,8 @@ class LaneCourseEstimator:
             assign_parts(trajs, topology, cfg, stops, frames)
         if cfg.stop_fit:
             stops = fit_stops(topology, frames, trajs, stops, cfg.stop_search, cfg.stop_step,
-                              float(stops.max(initial=0.0)) + 20.0)
+                              float(stops.max(initial=0.0)) + 20.0, cfg.stop_clip,
+                              cfg.stop_sweeps)
         self.stops = stops
         specs, pairs, _ = lane_specs(topology, trajs, cfg, stops=stops, frames=frames)
         key = (_topology_key(topology), tuple(s.id for s in specs))
@@ -147,6 +149,8 @@ class LaneCourseEstimator:
                     _respace(g, i)
             self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
         C = g.centers()
+        ang, self._mu = np.zeros(len(C)), np.zeros(len(g.specs))
+        all_angles(C, g.prev_st, g.next_st, g.st_ll, ang, self._mu)
         self._d2_0 = np.zeros_like(C)
         h = np.flatnonzero((g.prev_st >= 0) & (g.next_st >= 0))
         self._d2_0[h] = C[g.prev_st[h]] - 2 * C[h] + C[g.next_st[h]]
@@ -201,7 +205,9 @@ class LaneCourseEstimator:
         self._term = np.zeros(len(self._Q))
         lik = all_terms(self._C, self._Q, self._lo, self._hi, self._inv2s2(), self._eps(),
                         self._term)
-        return lik + log_prior(self._delta, 0.5 / cfg.sigma_delta ** 2, cfg.tau, g.n_shared())
+        self._lik = lik
+        return lik + log_prior(self._delta, self._mu, 0.5 / cfg.sigma_delta ** 2, cfg.tau,
+                               g.n_shared())
 
     def _inv2s2(self):
         return 0.5 / self.config.sigma_perp ** 2
@@ -234,13 +240,14 @@ class LaneCourseEstimator:
     def _chain(self, n: int) -> None:
         g = self.graph
         bP, bref, bm = g.P.copy(), g.ref.copy(), g.pair_merged.copy()
-        _, cur, best = run_chain(
+        acc, cur, best = run_chain(
             n, self._k, int(self.rng.integers(2 ** 31 - 1)), self._params(), g.P, g.axis, g.ref,
             g.home, g.users, g.nusers, g.st_normal, g.st_ll, g.pair_a, g.pair_b,
             g.pair_merged, g.prev_st, g.next_st, self._adep[0], self._adep[1], self._ang,
-            self._delta, self._C, self._Q, self._lo, self._hi, self._pdep[0], self._pdep[1],
+            self._delta, self._mu, self._C, self._Q, self._lo, self._hi, self._pdep[0], self._pdep[1],
             self._term, bP, bref, bm)
-        if best > cur:
+        self.last_chain = (int(acc), float(cur), float(best))
+        if self.config.keep_best and best > cur:
             g.set_state((bP, bref, bm))
             self._recompute()
         self._k += n

@@ -40,7 +40,7 @@ def _copy_best(P, ref, merged, bP, bref, bmerged):
 @njit(cache=True)
 def run_chain(n, k0, seed, prm, P, axis, ref, home, users, nusers, st_normal, st_ll,
               pair_a, pair_b, pair_merged, prev_st, next_st, adep_ptr, adep_idx, ang, delta,
-              C, Q, win_lo, win_hi, pdep_ptr, pdep_idx, term, best_P, best_ref, best_merged):
+              mu, C, Q, win_lo, win_hi, pdep_ptr, pdep_idx, term, best_P, best_ref, best_merged):
     """Draw ``n`` samples starting at global sample index ``k0``.
 
     Returns (accepted, log-posterior change of the final state, of the best state)."""
@@ -147,7 +147,7 @@ def run_chain(n, k0, seed, prm, P, axis, ref, home, users, nusers, st_normal, st
         dlp = 0.0
         for i in range(nl):
             l = ll_list[i]
-            d0 = delta[l]
+            d0 = delta[l] - mu[l]
             d1 = d0 + ll_dd[l]
             dlp -= (d1 * d1 - d0 * d0) * inv2sd2
         if ds != 0:

@@ -1,10 +1,13 @@
-"""Lane-course prior (paper §III-C): P(I_2) = s(I_2)^tau * prod_l N(delta_l; 0, sigma_delta).
+"""Lane-course prior (paper §III-C): P(I_2) = s(I_2)^tau * prod_l N(delta_l; mu_l, sigma_delta).
 
 ``delta_l`` is the sum of absolute direction changes along the center line of
 lanelet ``l``; for connectors it includes the junctions with the predecessor and
 successor lanelet (their neighbouring center points), so a connector that kinks
-where it meets its lanes pays for it. ``s(I_2)`` is the number of shared (merged)
-border points; we use ``tau * log(1 + s)`` so that ``s = 0`` stays finite.
+where it meets its lanes pays for it. The paper leaves the mean of the normal
+distribution open; we use ``mu_l`` = the turn the lanelet has to make (``delta_l`` of
+its initial shape: 0 for straight lanes, the turn angle for a connector), so every
+turn is free and only wiggles on top of it cost. ``s(I_2)`` is the number of shared
+(merged) border points; we use ``tau * log(1 + s)`` so that ``s = 0`` stays finite.
 """
 
 from __future__ import annotations
@@ -38,9 +41,11 @@ def all_angles(C, prev_st, next_st, st_ll, ang, delta):
 
 
 @njit(cache=True)
-def log_prior(delta, inv2sd2, tau, n_shared):
+def log_prior(delta, mu, inv2sd2, tau, n_shared):
+    """log s(I2)^tau + sum_l log N(delta_l; mu_l, sigma_delta) (unnormalised)."""
     s = 0.0
-    for d in delta:
+    for i in range(len(delta)):
+        d = delta[i] - mu[i]
         s -= d * d * inv2sd2
     return s + tau * math.log(1.0 + n_shared)
 

@@ -1,0 +1,145 @@
+"""LaneCourseEstimator API: initialisation (paper §III-A), anytime runs, degenerate input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from test_lanes_synth import synth_case
+
+from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
+from intersection_estimator.lanes.init import split_at_center, trajectories
+from intersection_estimator.model import Arm, Intersection
+from intersection_estimator.observations import Detections
+
+CASE = synth_case(3, n_arms=4, lanes=(2, 1), per_lane=2, length=40.0)
+
+
+def _run(seed, n=3000, case=CASE, cfg=None):
+    topo, _, _, dets = case
+    est = LaneCourseEstimator(cfg or LaneConfig(), seed)
+    est.initialise(topo, dets)
+    est.run(n_samples=n)
+    return est
+
+
+def test_deterministic_per_seed():
+    a, b = _run(7).lanelets, _run(7).lanelets
+    assert [l.id for l in a] == [l.id for l in b]
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x.center, y.center)
+        np.testing.assert_array_equal(x.left, y.left)
+    c = _run(8).lanelets
+    assert any(not np.array_equal(x.center, y.center) for x, y in zip(a, c))
+
+
+def test_generator_seed_and_samples_drawn():
+    est = _run(np.random.default_rng(3), n=1234)
+    assert est.samples_drawn == 1234
+    assert est.run(n_samples=100) == 100 and est.samples_drawn == 1334
+    assert est.run(time_budget_s=0.02) > 0
+
+
+def test_lanelets_are_a_connected_lane_graph():
+    topo, _, conns, _ = CASE
+    ls = _run(1).lanelets
+    by = {l.id: l for l in ls}
+    kinds = {k: [l for l in ls if l.kind == k] for k in ('entering', 'leaving', 'connector')}
+    assert len(kinds['entering']) == sum(a.lanes_in for a in topo.arms)
+    assert len(kinds['leaving']) == sum(a.lanes_out for a in topo.arms)
+    # one connector per observed (entering lane, leaving lane) pair, none without evidence
+    got = {(c.arm, c.lane_index, c.arm_to, int(c.id.rsplit('_', 1)[1])) for c in kinds['connector']}
+    assert got == set(conns)
+    for c in kinds['connector']:
+        pred = [l for l in kinds['entering'] if c.id in l.successors]
+        assert len(pred) == 1 and pred[0].arm == c.arm and len(c.successors) == 1
+        succ = by[c.successors[0]]
+        assert succ.kind == 'leaving' and succ.arm == c.arm_to
+        # consecutive lanelets share end points exactly
+        np.testing.assert_array_equal(c.left[0], pred[0].left[-1])
+        np.testing.assert_array_equal(c.right[0], pred[0].right[-1])
+        np.testing.assert_array_equal(c.left[-1], succ.left[0])
+        np.testing.assert_array_equal(c.right[-1], succ.right[0])
+    assert len({l.id for l in ls}) == len(ls)
+
+
+def test_lane_course_close_to_truth():
+    """Noise N(0, 1 m): the estimated center lines stay within decimetres of the truth."""
+    from intersection_estimator.evaluate import orthogonal_distances, resample
+    topo, gt, conns, _ = CASE
+    errs = []
+    for l in _run(2, n=20000).lanelets:
+        if l.kind == 'connector':
+            key = (l.arm, l.lane_index, l.arm_to, int(l.id.rsplit('_', 1)[1]))
+            truth = conns[key]
+        else:
+            truth = gt[(l.arm, 1 if l.kind == 'entering' else -1, l.lane_index)]
+        d = orthogonal_distances(resample(l.center), truth)
+        errs.append(np.nanmean(d))
+    assert np.mean(errs) < 0.35
+
+
+def test_split_at_closest_point_to_center():
+    xy = np.array([[10.0, 0.0], [5.0, 0.0], [1.0, 0.5], [0.0, 4.0], [0.0, 9.0]])
+    assert split_at_center(xy, np.zeros(2)) == 2
+
+
+def test_trajectories_sorted_by_time_and_ignore_untracked():
+    d = Detections.make([[0, 0], [1, 0], [2, 0], [5, 5]], t=[2.0, 1.0, 3.0, 0.0],
+                        track_id=[4, 4, 4, -1])
+    (tr,) = trajectories(d)
+    np.testing.assert_array_equal(tr.xy[:, 0], [1, 0, 2])
+
+
+@pytest.mark.parametrize('dets', [None, Detections.empty(),
+                                  Detections.make([[1.0, 2.0], [3.0, 4.0]], track_id=[-1, -1])])
+def test_no_trajectories_gives_straight_lanes(dets):
+    topo = CASE[0]
+    est = LaneCourseEstimator(LaneConfig(), 0)
+    est.initialise(topo, dets)
+    assert est.run(n_samples=500) == 500
+    ls = est.lanelets
+    assert len(ls) == topo.n_lanes and all(l.kind != 'connector' for l in ls)
+    assert all(np.isfinite(l.center).all() for l in ls)
+
+
+def test_one_trajectory():
+    topo, _, _, dets = CASE
+    one = dets.subset(dets.track_id == 0)
+    est = LaneCourseEstimator(LaneConfig(), 0)
+    est.initialise(topo, one)
+    est.run(n_samples=2000)
+    ls = est.lanelets
+    assert sum(l.kind == 'connector' for l in ls) == 1
+    assert all(np.isfinite(l.center).all() for l in ls)
+
+
+def test_empty_topology():
+    est = LaneCourseEstimator(LaneConfig(), 0)
+    est.initialise(Intersection(center=[0.0, 0.0], arms=[]), CASE[3])
+    assert est.run(n_samples=100) == 0 and est.lanelets == []
+
+
+def test_warm_start_keeps_the_chain():
+    topo, _, _, dets = CASE
+    est = LaneCourseEstimator(LaneConfig(), 0)
+    est.initialise(topo, dets)
+    est.run(n_samples=2000)
+    g = est.graph
+    est.initialise(topo, dets)               # same topology and connectors: keep going
+    assert est.graph is g
+    moved = Intersection(center=topo.center + 3.0, arms=topo.arms)
+    est.initialise(moved, dets)              # topology changed: re-initialise
+    assert est.graph is not g
+
+
+def test_lanelets_from_topology():
+    topo = Intersection(center=[1.0, 2.0], arms=[Arm(0.0, 1.0, 2, 1), Arm(2.0, 0.0, 1, 1),
+                                                 Arm(-2.0, 0.5, 1, 3)])
+    ls = lanelets_from_topology(topo, length=50.0)
+    assert len(ls) == topo.n_lanes and {l.kind for l in ls} == {'entering', 'leaving'}
+    for l in ls:
+        assert abs(np.linalg.norm(l.center[-1] - l.center[0]) - 50.0) < 1e-6
+        a = topo.arms[l.arm]
+        v = (l.center[-1] - l.center[0]) / 50.0
+        assert np.allclose(v, -a.direction if l.kind == 'entering' else a.direction)
