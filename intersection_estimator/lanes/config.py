@@ -23,6 +23,10 @@ _RANGES = {
     'min_fit_points': (2, 10**6, 'fewest points to re-fit an arm direction'),
     'max_refit_angle_deg': (0.0, 90.0, 'largest accepted change of an arm direction [deg]'),
     'lane_prior_points': (0.0, 1e6, 'pseudo points of the topology lane position in the re-fit'),
+    'complete_partial': (0, 1, '1: give one-sided trajectories their other lane by path fit'),
+    'complete_min_points': (1, 10**6, 'fewest points inside the stop line for that'),
+    'complete_max_cost': (0.0, 100.0, 'largest mean clipped squared distance to the path [m^2]'),
+    'complete_min_ratio': (1.0, 100.0, 'runner-up path must cost this many times more'),
     'arm_length_min': (5.0, 500.0, 'shortest entering/leaving lanelet [m]'),
     'arm_length_max': (5.0, 500.0, 'longest entering/leaving lanelet [m]'),
     'stop_margin': (0.0, 20.0, 'extra distance of the stop line beyond the corner of two arms [m]'),
@@ -82,6 +86,10 @@ class LaneConfig:
     min_fit_points: int = 20
     max_refit_angle_deg: float = 10.0
     lane_prior_points: float = 10.0
+    complete_partial: int = 1
+    complete_min_points: int = 5
+    complete_max_cost: float = 1.5
+    complete_min_ratio: float = 1.5
     arm_length_min: float = 20.0
     arm_length_max: float = 120.0
     stop_margin: float = 2.5

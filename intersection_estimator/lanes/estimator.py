@@ -16,7 +16,7 @@ from .mcmc import run_chain
 from .model import LaneGraph, build_graph
 from .prior import all_angles, angle_csr, log_prior
 from .refine import refine_offsets
-from .stops import fit_stops
+from .stops import complete_partial, fit_stops
 
 __all__ = ['LaneCourseEstimator', 'lanelets_from_topology']
 
@@ -120,6 +120,9 @@ class LaneCourseEstimator:
         for _ in range(cfg.refit_lanes):
             frames = fit_frames(topology, trajs, stops, cfg)
             assign_parts(trajs, topology, cfg, stops, frames)
+        if cfg.complete_partial:
+            complete_partial(topology, frames, trajs, stops, cfg.complete_min_points,
+                             cfg.complete_max_cost, cfg.complete_min_ratio, cfg.stop_clip)
         if cfg.stop_fit:
             stops = fit_stops(topology, frames, trajs, stops, cfg.stop_search, cfg.stop_step,
                               float(stops.max(initial=0.0)) + 20.0, cfg.stop_clip,

@@ -1,4 +1,7 @@
-"""Stop-line distance per arm from the turning traffic (extension of paper §III-A).
+"""Path model of the turning traffic (extensions of paper §III-A).
+
+``fit_stops``: the stop-line distance per arm from the turning traffic.
+``complete_partial``: the missing lane of a trajectory seen on one side only.
 
 The topology gives rays; where an arm's lanes end (and its connectors begin) is not
 part of it. ``init.stop_distances`` guesses it from the arm geometry; here we fit it:
@@ -20,7 +23,7 @@ from numba import njit
 
 from .likelihood import seg_dist2
 
-__all__ = ['fit_stops', 'path_cost']
+__all__ = ['fit_stops', 'path_cost', 'complete_partial']
 
 _NB = 16          # Bezier samples per path
 _EXT = 25.0       # straight extension before/after the connector [m]
@@ -106,3 +109,57 @@ def fit_stops(topo, frames, trajs, stops0: np.ndarray, search: float, step: floa
             best = min(stops0[a] + coarse, key=cost)                  # coarse grid, then
             stops[a] = min(np.clip(best + fine, lo, hi), key=cost)    # refine around it
     return stops
+
+
+def complete_partial(topo, frames, trajs, stops, min_points: int = 5, max_cost: float = 1.5,
+                     min_ratio: float = 1.5, clip: float = 2.0) -> int:
+    """Give a trajectory seen only on one side of the intersection its other lane.
+
+    A track that starts or ends inside the intersection has one part too short to be
+    assigned, so it would connect nothing. Its points inside the stop line of its
+    known lane are scored against the path to every lane of the other direction on
+    the other arms; the best is taken when it fits (mean clipped squared distance
+    below ``max_cost``) and is clearly better (``min_ratio``) than the runner-up.
+    Returns the number of completed trajectories.
+    """
+    from ..model import ENTERING, LEAVING
+    if not len(frames):
+        return 0
+    O = np.array([f.origin for f in frames])
+    U = np.array([f.u for f in frames])
+    N = np.array([f.n for f in frames])
+    lanes = {d: [(a, k, lat) for a, f in enumerate(frames) for (dd, k), lat in f.lat.items()
+                 if dd == d] for d in (ENTERING, LEAVING)}
+    done = 0
+    for tr in trajs:
+        if (tr.lane_in is None) == (tr.lane_out is None):
+            continue
+        known_in = tr.lane_in is not None
+        a, k = tr.lane_in if known_in else tr.lane_out
+        lat = frames[a].lat[(ENTERING if known_in else LEAVING, k)]
+        s = (tr.xy - O[a]) @ U[a]
+        inside = tr.xy[s < stops[a]]
+        cands = [(b, j, o) for b, j, o in lanes[LEAVING if known_in else ENTERING] if b != a]
+        if len(inside) < min_points or not cands:
+            continue
+        K, m = len(cands), len(inside)
+        mine = np.full(K, a, np.int64)
+        other = np.array([b for b, _, _ in cands], np.int64)
+        lat_m, lat_o = np.full(K, lat), np.array([o for _, _, o in cands])
+        pts = np.tile(inside, (K, 1))
+        pptr = np.arange(K + 1, dtype=np.int64) * m
+        costs = np.array([path_cost(stops, *((mine, lat_m, other, lat_o) if known_in else
+                                             (other, lat_o, mine, lat_m)),
+                                    pptr, pts, O, U, N, np.array([i], np.int64), clip * clip)
+                          for i in range(K)]) / m
+        order = np.argsort(costs)
+        best = costs[order[0]]
+        second = costs[order[1]] if K > 1 else np.inf
+        if best <= max_cost and second >= min_ratio * best:
+            b, j, _ = cands[order[0]]
+            if known_in:
+                tr.lane_out = (b, j)
+            else:
+                tr.lane_in = (b, j)
+            done += 1
+    return done
