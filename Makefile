@@ -49,6 +49,8 @@ $(STAMP)/package: $(PKG_SRC) $(STAMP)/msgs
 	@rm -rf build/lib build/bdist.* intersection_estimator.egg-info
 	$(PY) -c "import rclpy, intersection_estimator, msg_adapters, intersection_estimator_msgs.msg" \
 	  || { echo "setup: the venv does not import rclpy / intersection_estimator / its messages"; exit 1; }
+	cd / && $(CURDIR)/$(PY) -c "from intersection_estimator.pipeline import warmup; \
+	  print(f'setup: numba kernels compiled and cached in {warmup():.0f} s')"
 	@touch $@
 
 demo: setup

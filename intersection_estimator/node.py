@@ -23,7 +23,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 
 from . import params as P
 from .ingest import Ingest, RateLimitedLog, tick
-from .pipeline import OnlineEstimator
+from .pipeline import OnlineEstimator, warmup
 
 from msg_adapters.types import RclpyTypes
 from msg_adapters.topology import topology_msg
@@ -72,6 +72,7 @@ class IntersectionEstimatorNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.log = RateLimitedLog(self.get_logger(), period_s=5.0)
+        self.get_logger().info(f'estimator kernels ready in {warmup():.1f} s')
         self.estimator = OnlineEstimator(P.pipeline_config(self.values), seed=self.values['seed'])
         self.ingest = Ingest(self.values, RclpyTypes())
         self.types = RclpyTypes()

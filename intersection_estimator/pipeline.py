@@ -238,3 +238,17 @@ def _topology_key(best: Intersection) -> tuple:
     """What the lane course depends on: re-initialise lanes when it changes (§III)."""
     return ('ok', round(float(best.center[0]), 0), round(float(best.center[1]), 0),
             tuple((round(float(np.degrees(a.angle)) / 3), a.lanes_in, a.lanes_out) for a in best.arms))
+
+
+def warmup() -> float:
+    """Compile (or load from numba's cache) every kernel once; returns seconds spent.
+
+    The node calls this before its first tick, so that a tick never pays for JIT
+    compilation; ``make setup`` calls it after installing, to fill the cache.
+    """
+    from .sim import simulate_scenario
+    t0 = time.perf_counter()
+    sc = simulate_scenario(0)
+    for mode in ('tracked', 'raw'):
+        estimate(sc.detections(mode), mode=mode, topology_samples=200, lane_samples=200, seed=0)
+    return time.perf_counter() - t0

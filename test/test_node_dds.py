@@ -57,3 +57,38 @@ def test_node_refuses_bad_parameter_at_startup(node_process):
     proc.proc.wait(30)
     assert proc.proc.returncode != 0
     assert 'budget_ms' in proc.output()
+
+
+def test_node_estimates_live_traffic_from_another_process(ros_context, node_process):
+    """replay --live plays a bundled bag in its own process; the node, in another, publishes
+    a topology with the right number of arms, lanelets and markers."""
+    from intersection_estimator.estimate_io import read_gt
+    from intersection_estimator_msgs.msg import LaneletArray, Topology
+    from visualization_msgs.msg import MarkerArray
+    gt = read_gt(ROOT / 'bags' / 'tracked.gt.json')
+    node_proc = node_process([script('intersection_estimator_node'), '--ros-args',
+                              '-p', 'timer_period:=0.2', '-p', 'budget_ms:=150.0'])
+    listener, topos = _subscribe(ros_context, Topology, '/intersection_estimator/topology', 'latched')
+    lanelets, markers = [], []
+    listener.create_subscription(LaneletArray, '/intersection_estimator/lanelets', lanelets.append, 10)
+    listener.create_subscription(MarkerArray, '/intersection_estimator/markers', markers.append, 10)
+    try:
+        spin = _spinner(ros_context, listener)
+        assert wait_for(lambda: len(topos) > 0, 20, spin), node_proc.output()
+        player = node_process([script('intersection-estimator'), 'replay', '--live', '--rate', '2.0',
+                               str(ROOT / 'bags' / 'tracked')])
+
+        def converged():
+            return any(m.state != Topology.NO_DATA and len(m.arms) == len(gt.intersection.arms) for m in topos)
+        assert wait_for(converged, 60, spin), (node_proc.output() + player.output()
+                                                + str([(m.state, len(m.arms), m.observations) for m in topos[-5:]]))
+        assert wait_for(lambda: player.proc.poll() is not None, 60, spin), player.output()
+        assert player.proc.returncode == 0, player.output()
+        assert wait_for(lambda: lanelets and markers, 20, spin)
+        kinds = {l.kind for l in lanelets[-1].lanelets}
+        assert kinds == {0, 1, 2}, kinds        # entering, leaving and connectors
+        spaces = {m.ns for arr in markers for m in arr.markers}
+        assert {'center', 'left_lane_bound', 'right_lane_bound', 'center_lane_line'} <= spaces
+        assert node_proc.alive(), node_proc.output()
+    finally:
+        listener.destroy_node()
