@@ -29,8 +29,8 @@ STATE_LEN = HDR + STRIDE * MAXA
 (P_MIN_SEP, P_MIN_ARMS, P_MAX_ARMS, P_MIN_LANES, P_MAX_LANES, P_GAP_MAX, P_W_MIN, P_W_MAX,
  P_ROT, P_SHIFT, P_GAP_STEP, P_W_STEP, P_SPLIT_SPAN,
  P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE,
- P_INV_SP2, P_INV_SA2, P_FLOOR, P_TRAFFIC, P_D2_CUT, P_SAMPLE_W, P_W_DEFAULT,
- P_LANE_NORM) = range(26)
+ P_FLOOR, P_TRAFFIC, P_D2_CUT, P_SAMPLE_W, P_W_DEFAULT,
+ P_LANE_NORM, P_FINE_P, P_FINE_SCALE) = range(26)
 NPARAM = 26
 
 ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH = range(7)
@@ -88,6 +88,15 @@ def largest_gap(S):
 
 
 # ----------------------------------------------------------------------------- moves
+
+@njit(cache=True)
+def _step(P):
+    """Step scale of a continuous move: 1, or ``P_FINE_SCALE`` with prob. ``P_FINE_P``.
+
+    A fixed mixture of two symmetric uniform kernels is symmetric (ratio 0); the fine
+    scale (beyond the paper) lets the annealed chain settle within the paper's ranges.
+    """
+    return P[P_FINE_SCALE] if np.random.random() < P[P_FINE_P] else 1.0
 
 @njit(cache=True)
 def add_arm_angle_logdensity(S, phi, P):
@@ -149,14 +158,14 @@ def move_rotate(S, S2, P):
     n = int(S[2])
     k = int(np.random.random() * n)
     i = HDR + k * STRIDE
-    S2[i] = wrap(S[i] + (2.0 * np.random.random() - 1.0) * P[P_ROT])
+    S2[i] = wrap(S[i] + (2.0 * np.random.random() - 1.0) * P[P_ROT] * _step(P))
     return separation_ok(S2, k, P[P_MIN_SEP]), 0.0, k
 
 
 @njit(cache=True)
 def move_shift(S, S2, P):
     """Shift the center by (dc, phi) ~ U([0, shift] x [0, 2pi]) (symmetric)."""
-    r = np.random.random() * P[P_SHIFT]
+    r = np.random.random() * P[P_SHIFT] * _step(P)
     phi = np.random.random() * TWO_PI
     S2[0] = S[0] + r * math.cos(phi)
     S2[1] = S[1] + r * math.sin(phi)
@@ -169,7 +178,7 @@ def move_gap(S, S2, P):
     n = int(S[2])
     k = int(np.random.random() * n)
     i = HDR + k * STRIDE + GAP
-    g = S[i] + (2.0 * np.random.random() - 1.0) * P[P_GAP_STEP]
+    g = S[i] + (2.0 * np.random.random() - 1.0) * P[P_GAP_STEP] * _step(P)
     S2[i] = g
     return 0.0 <= g <= P[P_GAP_MAX], 0.0, k
 
@@ -180,7 +189,7 @@ def move_width(S, S2, P):
     n = int(S[2])
     k = int(np.random.random() * n)
     i = HDR + k * STRIDE + WID
-    w = S[i] + (2.0 * np.random.random() - 1.0) * P[P_W_STEP]
+    w = S[i] + (2.0 * np.random.random() - 1.0) * P[P_W_STEP] * _step(P)
     S2[i] = w
     return P[P_W_MIN] <= w <= P[P_W_MAX], 0.0, k
 
@@ -356,7 +365,7 @@ def log_prior(S, logPA, logPn, arm_const):
 # ----------------------------------------------------------------------------- likelihood
 
 @njit(cache=True)
-def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, out):
+def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """Unnormalised density of every observation under its best lane of arm ``k``.
 
     Paper eq. for P(z_i|I): closest lane with the same driving direction, Gaussian in the
@@ -375,8 +384,6 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, out):
     w = S[i0 + WID]
     ux = math.cos(a)
     uy = math.sin(a)
-    isp = 0.5 * P[P_INV_SP2]
-    isa = 0.5 * P[P_INV_SA2]
     cut = P[P_D2_CUT]
     ts = P[P_TRAFFIC]
     inv_n_in = nin ** -P[P_LANE_NORM]
@@ -394,7 +401,7 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, out):
             if ca > 1.0:
                 ca = 1.0
             ang = math.acos(ca)
-            e = isa * ang * ang
+            e = isa[i] * ang * ang
         else:
             d = dcls[i]
         nl = nin if d > 0.0 else nout
@@ -408,14 +415,14 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, out):
         d2 = dl * dl
         if s < 0.0:
             d2 += s * s
-        e += isp * d2
+        e += isp[i] * d2
         out[i] = math.exp(-e) * (inv_n_in if d > 0.0 else inv_n_out) if e < cut else 0.0
 
 
 @njit(cache=True)
-def all_columns(S, P, ox, oy, hx, hy, has_o, dcls, C):
+def all_columns(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C):
     for k in range(int(S[2])):
-        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, C[k])
+        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C[k])
 
 
 @njit(cache=True)
@@ -432,8 +439,8 @@ def combine(C, n, skip, newcol, use_new, wts, floor):
 
 
 @njit(cache=True)
-def full_loglik(S, P, ox, oy, hx, hy, has_o, dcls, wts, C):
-    all_columns(S, P, ox, oy, hx, hy, has_o, dcls, C)
+def full_loglik(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C):
+    all_columns(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C)
     return combine(C, int(S[2]), -1, C[0], False, wts, P[P_FLOOR])
 
 
@@ -441,7 +448,7 @@ def full_loglik(S, P, ox, oy, hx, hy, has_o, dcls, wts, C):
 
 @njit(cache=True)
 def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
-              ox, oy, hx, hy, has_o, dcls, wts, n_steps, temps, seed, stats):
+              ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats):
     """Metropolis-Hastings with simulated annealing (paper §II, Algorithm 1).
 
     Mutates ``S`` (chain state), ``C`` (per-arm density columns of ``S``) and
@@ -464,15 +471,15 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
         n2 = int(S2[2])
         n = int(S[2])
         if kind == SHIFT:
-            all_columns(S2, P, ox, oy, hx, hy, has_o, dcls, C2)
+            all_columns(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2)
             ll2 = combine(C2, n2, -1, col, False, wts, floor)
         elif kind == REMOVE_ARM:
             ll2 = combine(C, n, k, col, False, wts, floor)
         elif kind == ADD_ARM:
-            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, col)
+            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
             ll2 = combine(C, n, -1, col, True, wts, floor)
         else:
-            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, col)
+            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
             ll2 = combine(C, n, k, col, True, wts, floor)
         lp2 = log_prior(S2, logPA, logPn, arm_const)
         a = (ll2 + lp2 - ll - lp) / temps[step] + lq
@@ -494,3 +501,256 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
             best_lpost = ll + lp
             best_S[:] = S
     return ll, lp, best_lpost
+
+
+# ----------------------------------------------------------------------------- arm refit
+
+@njit(cache=True)
+def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths):
+    """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed.
+
+    Deterministic coordinate ascent on the posterior (initialisation aid, beyond the
+    paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
+    each, the lane counts per direction are chosen independently (the likelihood of
+    entering and leaving observations separates given the other arms' columns). Writes
+    the best into ``S`` and arm ``k``'s column into ``C``; returns the posterior gain.
+    """
+    n = int(S[2])
+    nobs = ox.shape[0]
+    i0 = HDR + k * STRIDE
+    a = S[i0 + ANG]
+    ux = math.cos(a)
+    uy = math.sin(a)
+    cut = P[P_D2_CUT]
+    ts = P[P_TRAFFIC]
+    beta = P[P_LANE_NORM]
+    floor = P[P_FLOOR]
+    lo = int(P[P_MIN_LANES])
+    hi = int(P[P_MAX_LANES])
+    tl = np.empty(nobs)
+    base = np.empty(nobs)
+    dd = np.empty(nobs)
+    other = np.zeros(nobs)
+    for i in range(nobs):
+        px = ox[i] - S[0]
+        py = oy[i] - S[1]
+        s = px * ux + py * uy
+        t = py * ux - px * uy
+        e = 0.0
+        if has_o[i]:
+            c = hx[i] * ux + hy[i] * uy
+            d = 1.0 if c < 0.0 else -1.0
+            ca = min(abs(c), 1.0)
+            ang = math.acos(ca)
+            e = isa[i] * ang * ang
+        else:
+            d = dcls[i]
+        dd[i] = d
+        tl[i] = d * ts * t
+        base[i] = e + (isp[i] * s * s if s < 0.0 else 0.0)
+        m = 0.0
+        for j in range(n):
+            if j != k and C[j, i] > m:
+                m = C[j, i]
+        other[i] = m
+    ng = gaps.shape[0] + 1
+    nw = widths.shape[0] + 1
+    best = -np.inf
+    bg = S[i0 + GAP]
+    bw = S[i0 + WID]
+    bi = S[i0 + NIN]
+    bo = S[i0 + NOUT]
+    ni = lo
+    no = lo
+    for gi in range(ng):
+        g = gaps[gi] if gi < ng - 1 else S[i0 + GAP]
+        for wi in range(nw):
+            w = widths[wi] if wi < nw - 1 else S[i0 + WID]
+            tot = 0.0
+            for side in range(2):
+                dsel = 1.0 if side == 0 else -1.0
+                sbest = -np.inf
+                sn = lo
+                for nl in range(lo, hi + 1):
+                    inv = float(nl) ** -beta
+                    ll = logPn[nl]
+                    for i in range(nobs):
+                        if dd[i] != dsel:
+                            continue
+                        q = tl[i] - 0.5 * g
+                        kk = math.floor(q / w)
+                        if kk < 0.0:
+                            kk = 0.0
+                        elif kk > nl - 1.0:
+                            kk = nl - 1.0
+                        dl = q - (kk + 0.5) * w
+                        e = base[i] + isp[i] * dl * dl
+                        v = math.exp(-e) * inv if e < cut else 0.0
+                        if other[i] > v:
+                            v = other[i]
+                        ll += wts[i] * math.log(v + floor)
+                    if ll > sbest:
+                        sbest = ll
+                        sn = nl
+                tot += sbest
+                if side == 0:
+                    ni = sn
+                else:
+                    no = sn
+            if tot > best:
+                best = tot
+                bg = g
+                bw = w
+                bi = ni
+                bo = no
+    # posterior of the current arm parameters, for the gain
+    old = np.empty(STRIDE)
+    for q in range(STRIDE):
+        old[q] = S[i0 + q]
+    col = np.empty(nobs)
+    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+    cur = combine(C, n, k, col, True, wts, floor) + logPn[int(old[NIN])] + logPn[int(old[NOUT])]
+    S[i0 + GAP] = bg
+    S[i0 + WID] = bw
+    S[i0 + NIN] = bi
+    S[i0 + NOUT] = bo
+    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+    new = combine(C, n, k, col, True, wts, floor) + logPn[int(bi)] + logPn[int(bo)]
+    if new < cur:
+        for q in range(STRIDE):
+            S[i0 + q] = old[q]
+        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+        new = cur
+    C[k, :] = col
+    return new - cur
+
+
+# ----------------------------------------------------------------------------- preprocessing
+
+@njit(cache=True)
+def local_pca(x, y, w, radius):
+    """Per point: principal direction (angle) and anisotropy of its weighted neighbourhood.
+
+    Anisotropy ``(l1 - l2) / (l1 + l2)`` is ~1 along a single road and small where roads
+    cross (the intersection box) or in isolated clutter.
+    """
+    n = x.shape[0]
+    theta = np.zeros(n)
+    aniso = np.zeros(n)
+    order = np.argsort(x)
+    xs = x[order]
+    r2 = radius * radius
+    for a in range(n):
+        i = order[a]
+        sw = 0.0
+        mx = 0.0
+        my = 0.0
+        sxx = 0.0
+        syy = 0.0
+        sxy = 0.0
+        lo = np.searchsorted(xs, x[i] - radius)
+        hi = np.searchsorted(xs, x[i] + radius, side='right')
+        for b in range(lo, hi):
+            j = order[b]
+            dx = x[j] - x[i]
+            dy = y[j] - y[i]
+            if dx * dx + dy * dy <= r2:
+                sw += w[j]
+                mx += w[j] * dx
+                my += w[j] * dy
+                sxx += w[j] * dx * dx
+                syy += w[j] * dy * dy
+                sxy += w[j] * dx * dy
+        mx /= sw
+        my /= sw
+        cxx = sxx / sw - mx * mx
+        cyy = syy / sw - my * my
+        cxy = sxy / sw - mx * my
+        tr = cxx + cyy
+        theta[i] = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)
+        aniso[i] = math.sqrt((cxx - cyy) ** 2 + 4.0 * cxy * cxy) / tr if tr > 1e-12 else 0.0
+    return theta, aniso
+
+
+@njit(cache=True)
+def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
+    """Paper §II-A for tracked objects: split each trajectory at its point closest to the
+    center ``(cx, cy)`` and reduce each part to its mean point and mean direction.
+
+    Rows are sorted by (track, time); ``h`` is the heading per row. With ``tol > 0`` a part
+    is first cut to its straight run from the far end (moving average of ``win`` heading
+    deviations from the far-end direction below ``tol``): the turn inside the intersection
+    box would bias the mean point and direction. Returns (mx, my, vx, vy) per kept part.
+    """
+    nt = starts.shape[0]
+    out = np.empty((2 * nt, 4))
+    m = 0
+    for t in range(nt):
+        a = starts[t]
+        b = ends[t]
+        best = np.inf
+        imin = a
+        for i in range(a, b):
+            d = (x[i] - cx) ** 2 + (y[i] - cy) ** 2
+            if d < best:
+                best = d
+                imin = i
+        for part in range(2):
+            lo = a if part == 0 else imin
+            hi = imin + 1 if part == 0 else b
+            n = hi - lo
+            if n < min_pts:
+                continue
+            x0 = x[lo]
+            x1 = x[lo]
+            y0 = y[lo]
+            y1 = y[lo]
+            for i in range(lo, hi):
+                x0 = min(x0, x[i])
+                x1 = max(x1, x[i])
+                y0 = min(y0, y[i])
+                y1 = max(y1, y[i])
+            if math.hypot(x1 - x0, y1 - y0) < min_len:
+                continue
+            # far end first: entering part (0) starts far, leaving part (1) ends far
+            step = 1 if part == 0 else -1
+            first = lo if part == 0 else hi - 1
+            keep = n
+            if tol > 0.0:
+                k = max(3, n // 5)
+                sx = 0.0
+                sy = 0.0
+                for q in range(k):
+                    sx += math.cos(h[first + step * q])
+                    sy += math.sin(h[first + step * q])
+                ref = math.atan2(sy, sx)
+                dev = np.empty(n)
+                for q in range(n):
+                    dev[q] = abs(wrap(h[first + step * q] - ref))
+                half = win // 2
+                keep = n
+                for q in range(n):
+                    acc = 0.0
+                    for r in range(q - half, q - half + win):
+                        if 0 <= r < n:
+                            acc += dev[r]
+                    if acc / win > tol:
+                        keep = q
+                        break
+                keep = max(keep, min(n, 3))
+            mx = 0.0
+            my = 0.0
+            vx = 0.0
+            vy = 0.0
+            for q in range(keep):
+                i = first + step * q
+                mx += x[i]
+                my += y[i]
+                vx += math.cos(h[i])
+                vy += math.sin(h[i])
+            out[m, 0] = mx / keep
+            out[m, 1] = my / keep
+            out[m, 2] = vx
+            out[m, 3] = vy
+            m += 1
+    return out[:m]

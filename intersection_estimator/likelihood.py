@@ -38,6 +38,8 @@ from . import _kernels as K
 
 __all__ = ['ObservationSet', 'log_likelihood', 'log_likelihood_reference']
 
+FIELDS = ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w', 'sigma', 'sigma_ang')
+
 
 @dataclass
 class ObservationSet:
@@ -45,7 +47,10 @@ class ObservationSet:
 
     x, y: mean position; hx, hy: unit orientation (0 if none); has_o: orientation known;
     d: driving direction relative to the center (+1 entering, -1 leaving), used when
-    there is no orientation; w: weight (voxel count or 1 per trajectory part).
+    there is no orientation; w: weight (voxel count or 1 per trajectory part);
+    sigma: orthogonal-distance sigma [m] (a trajectory mean is far more precise than a
+    single detection); sigma_ang: angle sigma [rad] (heading of a track vs. a local
+    principal direction of radar points).
     """
 
     x: np.ndarray
@@ -55,6 +60,8 @@ class ObservationSet:
     has_o: np.ndarray
     d: np.ndarray
     w: np.ndarray
+    sigma: np.ndarray
+    sigma_ang: np.ndarray
 
     def __len__(self) -> int:
         return len(self.x)
@@ -62,7 +69,7 @@ class ObservationSet:
     @classmethod
     def empty(cls) -> 'ObservationSet':
         z = np.zeros(0)
-        return cls(z, z, z, z, np.zeros(0, np.bool_), z, z)
+        return cls(z, z, z, z, np.zeros(0, np.bool_), z, z, z, z)
 
     @classmethod
     def concat(cls, parts) -> 'ObservationSet':
@@ -70,14 +77,19 @@ class ObservationSet:
         if not parts:
             return cls.empty()
         return cls(*[np.ascontiguousarray(np.concatenate([getattr(p, f) for p in parts]))
-                     for f in ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w')])
+                     for f in FIELDS])
 
     @property
     def xy(self) -> np.ndarray:
         return np.stack([self.x, self.y], axis=1)
 
+    def subset(self, keep) -> 'ObservationSet':
+        return ObservationSet(*[np.ascontiguousarray(getattr(self, f)[keep]) for f in FIELDS])
+
     def kernel_args(self):
-        return self.x, self.y, self.hx, self.hy, self.has_o, self.d, self.w
+        """(x, y, hx, hy, has_o, d, 0.5/sigma^2, 0.5/sigma_ang^2, w) for the kernels."""
+        return (self.x, self.y, self.hx, self.hy, self.has_o, self.d,
+                0.5 / self.sigma ** 2, 0.5 / self.sigma_ang ** 2, self.w)
 
 
 def log_likelihood(S: np.ndarray, obs: ObservationSet, P: np.ndarray) -> float:
@@ -107,7 +119,7 @@ def log_likelihood_reference(S: np.ndarray, obs: ObservationSet, P: np.ndarray) 
             offs = direction * P[K.P_TRAFFIC] * (0.5 * gap + (np.arange(nl) + 0.5) * w)
             dl = np.min(np.abs(t[:, None] - offs[None, :]), axis=1)
             d2 = dl ** 2 + np.where(s < 0, s ** 2, 0.0)
-            e = 0.5 * P[K.P_INV_SP2] * d2 + 0.5 * P[K.P_INV_SA2] * ang_dev ** 2
+            e = 0.5 * d2 / obs.sigma ** 2 + 0.5 * ang_dev ** 2 / obs.sigma_ang ** 2
             val = np.where(e < P[K.P_D2_CUT], np.exp(-e), 0.0)
             val = val / float(nl) ** P[K.P_LANE_NORM]
             dens = np.where(d == direction, val, dens)

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from ._kernels import local_pca, split_tracks
 from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
@@ -36,6 +37,10 @@ __all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations',
 
 @dataclass(frozen=True)
 class PreprocessConfig:
+    sigma_track: float = 0.5            # [m] sigma_perp of a trajectory part's mean point
+    sigma_point: float = 1.2            # [m] sigma_perp of a single detection / voxel
+    sigma_angle_deg: float = 5.0        # heading of a trajectory part / detection
+    pca_radius: float = 8.0             # [m] initial center: local PCA of radar voxels
     voxel_size: float = 2.0             # [m] raw / heading voxel edge
     heading_sectors: int = 8            # heading voxelisation: sectors of 360/n deg
     weight_power: float = 1.0           # voxel weight = count ** power * weight_scale
@@ -91,29 +96,20 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
     ends = np.r_[starts[1:], len(tid)]
     c = np.asarray(center, float)
-    out = []
-    for a, b in zip(starts, ends):
-        p = xy[a:b]
-        i = int(np.argmin(np.sum((p - c) ** 2, axis=1)))
-        for lo, hi, outward in ((0, i + 1, False), (i, len(p), True)):
-            part = p[lo:hi]
-            if len(part) < cfg.min_part_points:
-                continue
-            if np.hypot(*(part.max(axis=0) - part.min(axis=0))) < cfg.min_part_length:
-                continue
-            h = hd[a + lo:a + hi]
+    if not np.isfinite(hd).all():      # rows without heading: direction from positions
+        for a, b in zip(starts, ends):
+            h = hd[a:b]
             if not np.isfinite(h).all():
-                h = _path_heading(part)
-            if cfg.trim_turn_deg > 0:
-                keep = _straight_run(h, outward, math.radians(cfg.trim_turn_deg))
-                part, h = part[keep], h[keep]
-            out.append((*part.mean(axis=0), np.cos(h).sum(), np.sin(h).sum()))
-    if not out:
+                hd[a:b] = _path_heading(xy[a:b])
+    o = split_tracks(xy[:, 0].copy(), xy[:, 1].copy(), hd, starts, ends, float(c[0]), float(c[1]),
+                     cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5)
+    if len(o) == 0:
         return ObservationSet.empty()
-    o = np.asarray(out)
     hx, hy, ok = _unit(o[:, 2], o[:, 3])
     d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
-    obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)))
+    obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
+                         np.full(len(o), cfg.sigma_track),
+                         np.full(len(o), math.radians(cfg.sigma_angle_deg)))
     return _drop_near_center(obs, c, cfg)
 
 
@@ -123,27 +119,6 @@ def _path_heading(p: np.ndarray) -> np.ndarray:
         return np.zeros(len(p))
     d = np.gradient(p, axis=0)
     return np.arctan2(d[:, 1], d[:, 0])
-
-
-def _straight_run(h: np.ndarray, outward: bool, tol: float, win: int = 5) -> slice:
-    """The straight section of a trajectory part, from its far end toward the center.
-
-    The reference direction is the mean heading of the farthest fifth of the part; the
-    run ends where the moving average (``win`` points) of the heading deviation exceeds
-    ``tol`` -- the turn inside the intersection box, which would bias the mean point and
-    direction of the part (beyond the paper: it reduces the whole part).
-    """
-    n = len(h)
-    hh = h[::-1] if outward else h           # far end first
-    k = max(3, n // 5)
-    ref = math.atan2(np.sin(hh[:k]).sum(), np.cos(hh[:k]).sum())
-    dev = np.abs(wrap_angle(hh - ref))
-    if n > win:
-        dev = np.convolve(dev, np.ones(win) / win, mode='same')
-    bad = np.flatnonzero(dev > tol)
-    m = int(bad[0]) if len(bad) else n
-    m = max(m, min(n, 3))
-    return slice(n - m, n) if outward else slice(0, m)
 
 
 def radar_filter(dets: Detections, cfg: PreprocessConfig) -> np.ndarray:
@@ -170,9 +145,11 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obser
     d = np.where(dop * proj > 0, -1.0, 1.0)[keep]
     vxy, vcls, cnt, _ = voxelise(xy[keep], (d > 0).astype(np.int64), cfg.voxel_size)
     dcls = np.where(vcls > 0, 1.0, -1.0)
-    z = np.zeros(len(vxy))
-    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), z, z.copy(), np.zeros(len(vxy), np.bool_),
-                         dcls, cfg.weight_scale * cnt ** cfg.weight_power)
+    n = len(vxy)
+    z = np.zeros(n)
+    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), z, z.copy(), np.zeros(n, np.bool_),
+                         dcls, cfg.weight_scale * cnt ** cfg.weight_power,
+                         np.full(n, cfg.sigma_point), np.full(n, 1.0))
     return _drop_near_center(obs, c, cfg)
 
 
@@ -190,16 +167,16 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     c = np.asarray(center, float)
     d = _direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
     obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, ok, d,
-                         cfg.weight_scale * cnt ** cfg.weight_power)
+                         cfg.weight_scale * cnt ** cfg.weight_power,
+                         np.full(len(vxy), cfg.sigma_point),
+                         np.full(len(vxy), math.radians(cfg.sigma_angle_deg)))
     return _drop_near_center(obs, c, cfg)
 
 
 def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig) -> ObservationSet:
     if cfg.min_center_dist <= 0 or len(obs) == 0:
         return obs
-    keep = np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist
-    return ObservationSet(*[np.ascontiguousarray(getattr(obs, f)[keep])
-                            for f in ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w')])
+    return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist)
 
 
 def preprocess(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
@@ -237,16 +214,7 @@ def seed_lines(dets: Detections, cfg: PreprocessConfig):
         if len(vxy) > 1500:
             keep = np.argsort(-cnt, kind='stable')[:1500]
             vxy, cnt = vxy[keep], cnt[keep]
-        d2 = np.sum((vxy[:, None, :] - vxy[None, :, :]) ** 2, axis=2)
-        nb = (d2 < 64.0) * cnt[None, :]
-        sw = nb.sum(axis=1)
-        mu = nb @ vxy / sw[:, None]
-        dx = vxy[None, :, 0] - mu[:, None, 0]
-        dy = vxy[None, :, 1] - mu[:, None, 1]
-        sxx, syy, sxy = (nb * dx * dx).sum(1) / sw, (nb * dy * dy).sum(1) / sw, (nb * dx * dy).sum(1) / sw
-        theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)
-        tr = sxx + syy
-        aniso = np.sqrt((sxx - syy) ** 2 + 4 * sxy ** 2) / np.maximum(tr, 1e-9)
+        theta, aniso = local_pca(vxy[:, 0].copy(), vxy[:, 1].copy(), cnt, cfg.pca_radius)
         pts.append(vxy)
         dirs.append(np.stack([np.cos(theta), np.sin(theta)], axis=1))
         wts.append(np.sqrt(cnt) * aniso ** 2)

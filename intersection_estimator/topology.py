@@ -49,6 +49,8 @@ class TopologyConfig:
     shift_max: float = 6.0               # [m]
     gap_step: float = 1.8                # [m]
     width_step: float = 0.25             # [m]
+    fine_step_prob: float = 0.5          # continuous moves use fine_step_scale x range
+    fine_step_scale: float = 0.1         # ... with this probability (beyond the paper)
     split_span_deg: float = 60.0         # add arm next to an arm: offset U[min_sep, +span]
     # --- model bounds ---------------------------------------------------------------
     min_sep_deg: float = 30.0            # min angle between arms (benchmark generator: 45)
@@ -65,16 +67,18 @@ class TopologyConfig:
     arm_count_prior: tuple = ARM_COUNT_PRIOR
     lane_count_prior: tuple = LANE_COUNT_PRIOR
     # --- likelihood -----------------------------------------------------------------
-    sigma_perp: float = 1.0              # [m]
-    sigma_angle_deg: float = 10.0
+    sigma_track: float = 0.5             # [m] sigma_perp of a trajectory part's mean point
+    sigma_point: float = 1.2             # [m] sigma_perp of a detection (raw / heading voxel)
+    sigma_angle_deg: float = 5.0         # heading of a trajectory part / detection
+    pca_radius: float = 8.0              # [m] initial center: local PCA of radar voxels
     clutter_floor: float = 0.01          # uniform outlier level relative to the peak density
     cut_sigma2: float = 30.0             # densities below exp(-cut) are 0 (speed)
-    lane_norm: float = 1.0               # density / (lanes of that arm and direction)**this
+    lane_norm: float = 0.5               # density / (lanes of that arm and direction)**this
     # --- preprocessing (paper §II-A) ------------------------------------------------
     voxel_size: float = 2.0              # [m]
     heading_sectors: int = 8
-    weight_power: float = 1.0
-    weight_scale: float = 1.0
+    weight_power: float = 0.5
+    weight_scale: float = 0.05
     min_doppler: float = 0.5             # [m/s]
     min_rcs: float = 0.0                 # [dBsm]
     min_radial_cos: float = 0.25
@@ -85,9 +89,11 @@ class TopologyConfig:
     recenter_threshold: float = 2.0      # [m] re-preprocess when the center moved more
     recenter_window: int = 2500          # ... checked during the first samples after new data
     # --- annealing ------------------------------------------------------------------
-    t_start: float = 8.0
+    t_start: float = 1.0
     t_end: float = 0.5
     anneal_samples: int = 5000
+    refit_sweeps: int = 2                # init: per-arm lane/gap/width coordinate ascent
+    polish_samples: int = 1000           # first samples of a new chain: continuous moves only
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule
     chunk: int = 500                     # samples per compiled call (anytime granularity)
     converge_window: int = 2000
@@ -106,6 +112,8 @@ class TopologyConfig:
         need('shift_max', 0 < self.shift_max <= 100, '(0, 100] m')
         need('gap_step', 0 < self.gap_step <= 20, '(0, 20] m')
         need('width_step', 0 < self.width_step <= 2, '(0, 2] m')
+        need('fine_step_prob', 0 <= self.fine_step_prob <= 1, '[0, 1]')
+        need('fine_step_scale', 0 < self.fine_step_scale <= 1, '(0, 1]')
         need('split_span_deg', 0 <= self.split_span_deg <= 180, '[0, 180]')
         need('min_sep_deg', 1 <= self.min_sep_deg <= 120, '[1, 120]')
         need('min_arms', 1 <= self.min_arms <= K.MAXA, f'[1, {K.MAXA}]')
@@ -127,8 +135,10 @@ class TopologyConfig:
         need('lane_count_prior', min(self.lane_count_prior) >= 0
              and sum(self.lane_count_prior[self.min_lanes:self.max_lanes + 1]) > 0,
              'non-negative probabilities with mass on [min_lanes, max_lanes]')
-        need('sigma_perp', 0.01 <= self.sigma_perp <= 20, '[0.01, 20] m')
+        need('sigma_track', 0.01 <= self.sigma_track <= 20, '[0.01, 20] m')
+        need('sigma_point', 0.01 <= self.sigma_point <= 20, '[0.01, 20] m')
         need('sigma_angle_deg', 0.1 <= self.sigma_angle_deg <= 90, '[0.1, 90]')
+        need('pca_radius', 1 <= self.pca_radius <= 50, '[1, 50] m')
         need('clutter_floor', 0 < self.clutter_floor < 1, '(0, 1)')
         need('lane_norm', 0 <= self.lane_norm <= 2, '[0, 2]')
         need('cut_sigma2', 1 <= self.cut_sigma2 <= 700, '[1, 700]')
@@ -147,6 +157,8 @@ class TopologyConfig:
         need('t_start', 0 < self.t_start <= 1e4, '(0, 1e4]')
         need('t_end', 0 < self.t_end <= self.t_start, '(0, t_start]')
         need('anneal_samples', 1 <= self.anneal_samples, '[1, inf)')
+        need('refit_sweeps', 0 <= self.refit_sweeps <= 10, '[0, 10]')
+        need('polish_samples', 0 <= self.polish_samples, '[0, inf)')
         need('reheat_fraction', 0 <= self.reheat_fraction <= 1, '[0, 1]')
         need('chunk', 1 <= self.chunk <= 10 ** 7, '[1, 1e7]')
         need('converge_window', 1 <= self.converge_window, '[1, inf)')
@@ -157,10 +169,12 @@ class TopologyConfig:
         names = {f.name for f in fields(PreprocessConfig)}
         return PreprocessConfig(**{k: v for k, v in asdict(self).items() if k in names})
 
-    def kernel_params(self) -> np.ndarray:
-        """The parameter vector ``P`` of :mod:`_kernels`."""
+    def kernel_params(self, continuous_only: bool = False) -> np.ndarray:
+        """The parameter vector ``P`` of :mod:`_kernels` (optionally without dimension moves)."""
         P = np.zeros(K.NPARAM)
         p = np.array([self.p_rotate, self.p_shift, self.p_gap, self.p_arm, self.p_lane, self.p_width])
+        if continuous_only:
+            p[3:5] = 0.0
         cum = np.cumsum(p / p.sum())
         P[K.P_MIN_SEP] = math.radians(self.min_sep_deg)
         P[K.P_MIN_ARMS] = self.min_arms
@@ -176,14 +190,14 @@ class TopologyConfig:
         P[K.P_W_STEP] = self.width_step
         P[K.P_SPLIT_SPAN] = math.radians(self.split_span_deg)
         P[[K.P_C_ROT, K.P_C_SHIFT, K.P_C_GAP, K.P_C_ARM, K.P_C_LANE]] = cum[:5]
-        P[K.P_INV_SP2] = 1.0 / self.sigma_perp ** 2
-        P[K.P_INV_SA2] = 1.0 / math.radians(self.sigma_angle_deg) ** 2
         P[K.P_FLOOR] = self.clutter_floor
         P[K.P_TRAFFIC] = self.traffic_side
         P[K.P_D2_CUT] = self.cut_sigma2
         P[K.P_SAMPLE_W] = 1.0 if self.p_width > 0 else 0.0
         P[K.P_W_DEFAULT] = self.lane_width
         P[K.P_LANE_NORM] = self.lane_norm
+        P[K.P_FINE_P] = self.fine_step_prob
+        P[K.P_FINE_SCALE] = self.fine_step_scale
         return P
 
     @property
@@ -196,6 +210,7 @@ class _Tables:
 
     def __init__(self, cfg: TopologyConfig):
         self.P = cfg.kernel_params()
+        self.P_polish = cfg.kernel_params(continuous_only=True)
         self.logPA = count_log_table(cfg.arm_count_prior, cfg.min_arms, cfg.max_arms, K.MAXA + 1)
         size = cfg.max_lanes + 1
         self.logPn = count_log_table(cfg.lane_count_prior, cfg.min_lanes, cfg.max_lanes, size)
@@ -229,6 +244,7 @@ class TopologyEstimator:
         self._chain: Chain | None = None
         self._pp_center = None
         self._since_data = 0
+        self._polish_left = 0
         self._last_improve = 0
         self._ref_best = -math.inf
         self.samples_drawn = 0
@@ -259,6 +275,8 @@ class TopologyEstimator:
         chunk = self.cfg.chunk if time_budget_s is None else min(self.cfg.chunk, 250)
         while True:
             m = chunk if n_samples is None else min(chunk, n_samples - done)
+            if self._polish_left > 0:
+                m = min(m, self._polish_left)
             if m <= 0:
                 break
             self._advance(m)
@@ -325,7 +343,28 @@ class TopologyEstimator:
         C = np.zeros((K.MAXA, 0))
         self._chain = Chain(S=S, C=C, ll=0.0, lp=0.0, best_S=S.copy(), best_lpost=-math.inf,
                             step=0, stats=np.zeros(2 * len(K.MOVE_NAMES), np.int64))
+        self._polish_left = cfg.polish_samples
         self._preprocess(c)
+        if cfg.polish_samples == 0:
+            self._refit()
+
+    def _refit(self) -> None:
+        """Coordinate ascent over each arm's lanes, gap and width (init aid; monotone)."""
+        c, cfg = self._chain, self.cfg
+        if len(self._obs) == 0 or cfg.refit_sweeps == 0:
+            return
+        gaps = np.linspace(0.0, cfg.gap_max, int(round(cfg.gap_max / 0.25)) + 1)
+        widths = (np.linspace(cfg.lane_width_min, cfg.lane_width_max, 11) if cfg.sample_width
+                  else np.zeros(0))
+        for _ in range(cfg.refit_sweeps):
+            for k in range(int(c.S[2])):
+                K.refit_arm(c.S, k, self._t.P, self._t.logPn, *self._obs.kernel_args(), c.C,
+                            gaps, widths)
+        c.ll, _ = self._score(c.S, c.C)
+        c.lp = float(K.log_prior(c.S, self._t.logPA, self._t.logPn, self._t.arm_const))
+        if c.ll + c.lp > c.best_lpost:
+            c.best_S[:] = c.S
+            c.best_lpost = c.ll + c.lp
 
     def _complete_arms(self, angles, o, w):
         """Ensure min_arms <= |A|: add arms opposite / evenly spaced when data are scarce."""
@@ -377,8 +416,13 @@ class TopologyEstimator:
         c, t, cfg = self._chain, self._t, self.cfg
         temps = temperatures(c.step, m, cfg.t_start, cfg.t_end, cfg.anneal_samples)
         seed = int(self._rng.integers(0, 2 ** 31 - 1))
-        advance(c, m, temps, seed, t.P, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn,
+        P = t.P_polish if self._polish_left > 0 else t.P
+        was_polishing = self._polish_left > 0
+        self._polish_left = max(0, self._polish_left - m)
+        advance(c, m, temps, seed, P, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn,
                 self._obs)
+        if was_polishing and self._polish_left == 0:
+            self._refit()
         self.samples_drawn += m
         self._since_data += m
         if c.best_lpost > self._ref_best + cfg.converge_tol:

@@ -1,0 +1,204 @@
+"""Moves of Algorithm 1: validity and reversibility with consistent Hastings factors."""
+
+import math
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from intersection_estimator import _kernels as K
+from intersection_estimator.model import Arm, Intersection
+from intersection_estimator.moves import (MOVE_NAMES, arm_rows, is_valid, pack_state,
+                                          proposal_log_density, propose_move, unpack_state)
+from intersection_estimator.topology import TopologyConfig, _Tables
+
+CFG = TopologyConfig()
+TAB = _Tables(CFG)
+P = TAB.P
+SET = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+@st.composite
+def states(draw):
+    """Valid packed states: arm angles at least min_sep apart, bounds respected."""
+    ms = math.radians(CFG.min_sep_deg)
+    n = draw(st.integers(CFG.min_arms, CFG.max_arms))
+    slack = 2 * math.pi - n * ms
+    raw = draw(st.lists(st.floats(0.01, 1.0), min_size=n, max_size=n))
+    gaps = ms + slack * np.asarray(raw) / sum(raw) * 0.999
+    a0 = draw(st.floats(-math.pi, math.pi))
+    angles = (a0 + np.cumsum(gaps) + math.pi) % (2 * math.pi) - math.pi
+    arms = [Arm(angle=float(a),
+                gap=draw(st.floats(0.0, CFG.gap_max)),
+                lanes_in=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
+                lanes_out=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
+                lane_width=draw(st.floats(CFG.lane_width_min, CFG.lane_width_max)))
+            for a in angles]
+    c = draw(st.tuples(st.floats(-100, 100), st.floats(-100, 100)))
+    S = pack_state(Intersection(center=np.asarray(c), arms=arms))
+    rows = arm_rows(S)   # keep slot order random, like a chain after removals
+    perm = np.asarray(draw(st.permutations(list(range(n)))))
+    rows[:] = rows[perm]
+    return S
+
+
+def _lq(S_from, S_to, kind):
+    return proposal_log_density(S_from, S_to, kind, P, TAB.logqn)
+
+
+@SET
+@given(states())
+def test_generated_states_are_valid(S):
+    assert is_valid(S, P)
+
+
+@SET
+@given(states(), st.sampled_from(range(len(MOVE_NAMES))), st.integers(0, 2 ** 31 - 2))
+def test_every_move_keeps_the_model_valid(S, kind, seed):
+    ok, lq, S2 = propose_move(S, kind, P, TAB.logqn, seed)
+    if ok:
+        assert is_valid(S2, P), MOVE_NAMES[kind]
+        assert math.isfinite(lq)
+
+
+@SET
+@given(states(), st.sampled_from([K.ROTATE, K.SHIFT, K.CHANGE_GAP, K.WIDTH]),
+       st.integers(0, 2 ** 31 - 2))
+def test_continuous_moves_are_symmetric(S, kind, seed):
+    ok, lq, S2 = propose_move(S, kind, P, TAB.logqn, seed)
+    if not ok:
+        return
+    assert lq == 0.0
+    changed = np.flatnonzero(S2 != S)
+    if kind == K.SHIFT:
+        assert set(changed) <= {0, 1}
+        assert np.hypot(*(S2[:2] - S[:2])) <= CFG.shift_max + 1e-9
+    else:
+        assert len(changed) <= 1   # one parameter of one arm
+        if len(changed):
+            i = changed[0]
+            step = {K.ROTATE: math.radians(CFG.rotate_max_deg), K.CHANGE_GAP: CFG.gap_step,
+                    K.WIDTH: CFG.width_step}[kind]
+            d = S2[i] - S[i]
+            if kind == K.ROTATE:
+                d = (d + math.pi) % (2 * math.pi) - math.pi
+            assert abs(d) <= step + 1e-9    # the reverse step lies in the same range
+    assert _lq(S, S2, kind) == _lq(S2, S, kind)
+
+
+def _apply_lane_op(S, k, entering, add, median):
+    S2 = S.copy()
+    i = K.HDR + k * K.STRIDE
+    j = i + (K.NIN if entering else K.NOUT)
+    S2[j] += 1 if add else -1
+    if median:
+        S2[i + K.GAP] += -S[i + K.WID] if add else S[i + K.WID]
+    return S2
+
+
+@SET
+@given(states(), st.integers(0, 2 ** 31 - 2))
+def test_lane_move_has_its_reverse(S, seed):
+    ok, lq, S2 = propose_move(S, K.LANE, P, TAB.logqn, seed)
+    if not ok:
+        return
+    assert lq == 0.0
+    found = False
+    for k in range(int(S[2])):
+        for entering in (True, False):
+            for add in (True, False):
+                for median in (True, False):
+                    if np.allclose(_apply_lane_op(S, k, entering, add, median), S2, atol=1e-12):
+                        back = _apply_lane_op(S2, k, entering, not add, median)
+                        assert np.allclose(back, S, atol=1e-9)
+                        found = True
+    assert found
+
+
+@SET
+@given(states(), st.integers(0, 2 ** 31 - 2))
+def test_add_arm_ratio_matches_reference(S, seed):
+    ok, lq, S2 = propose_move(S, K.ADD_ARM, P, TAB.logqn, seed)
+    if not ok:
+        return
+    n2 = int(S2[2])
+    assert n2 == int(S[2]) + 1
+    assert np.array_equal(S2[:K.HDR + (n2 - 1) * K.STRIDE][3:], S[3:K.HDR + (n2 - 1) * K.STRIDE])
+    expect = _lq(S2, S, K.REMOVE_ARM) - _lq(S, S2, K.ADD_ARM)
+    assert abs(lq - expect) < 1e-9
+
+
+@SET
+@given(states(), st.integers(0, 2 ** 31 - 2))
+def test_remove_arm_ratio_matches_reference(S, seed):
+    ok, lq, S2 = propose_move(S, K.REMOVE_ARM, P, TAB.logqn, seed)
+    n = int(S[2])
+    if n <= CFG.min_arms:
+        assert not ok
+        return
+    rows, rows2 = arm_rows(S), arm_rows(S2)
+    assert len(rows2) == n - 1
+    missing = [r for r in rows if not any(np.array_equal(r, q) for q in rows2)]
+    assert len(missing) == 1
+    # the reverse proposal: add exactly the removed arm to S2
+    S_back = S2.copy()
+    S_back[K.HDR + (n - 1) * K.STRIDE: K.HDR + n * K.STRIDE] = missing[0]
+    S_back[2] = n
+    rev = _lq(S2, S_back, K.ADD_ARM)
+    if not ok:
+        assert rev == -math.inf     # rejected only when the add move cannot propose it
+        return
+    assert abs(lq - (rev - _lq(S, S2, K.REMOVE_ARM))) < 1e-9
+    assert sorted(map(tuple, arm_rows(S_back))) == sorted(map(tuple, rows))
+
+
+def test_add_then_remove_round_trip_is_detailed_balance_consistent():
+    """Along a forward/backward pair the two log ratios cancel exactly."""
+    rng = np.random.default_rng(3)
+    S = pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=0.0), Arm(angle=2.0)]))
+    hits = 0
+    for seed in rng.integers(0, 2 ** 31 - 2, 200):
+        ok, lq_add, S2 = propose_move(S, K.ADD_ARM, P, TAB.logqn, int(seed))
+        if not ok:
+            continue
+        S_rm = S2.copy()
+        lq_rm = None
+        for s2 in range(200):   # find the removal of the added arm (slot 2)
+            ok2, lq, S3 = propose_move(S2, K.REMOVE_ARM, P, TAB.logqn, s2)
+            if ok2 and np.array_equal(S3[:K.HDR + 2 * K.STRIDE], S[:K.HDR + 2 * K.STRIDE]) \
+                    and int(S3[2]) == 2:
+                S_rm, lq_rm = S3, lq
+                break
+        assert lq_rm is not None
+        assert abs(lq_add + lq_rm) < 1e-9
+        assert np.array_equal(S_rm[:K.HDR + 2 * K.STRIDE], S[:K.HDR + 2 * K.STRIDE])
+        hits += 1
+    assert hits > 50
+
+
+def test_pack_unpack_round_trip():
+    inter = Intersection(center=np.array([1.0, 2.0]),
+                         arms=[Arm(angle=0.5, gap=1.0, lanes_in=2, lanes_out=3, lane_width=3.2),
+                               Arm(angle=-2.0, gap=0.0, lanes_in=1, lanes_out=1, lane_width=3.6)])
+    back = unpack_state(pack_state(inter))
+    assert np.allclose(back.center, inter.center)
+    for a, b in zip(inter.arms, back.arms):
+        assert (a.lanes_in, a.lanes_out) == (b.lanes_in, b.lanes_out)
+        assert math.isclose(a.angle, b.angle) and math.isclose(a.gap, b.gap)
+        assert math.isclose(a.lane_width, b.lane_width)
+
+
+def test_move_frequencies_follow_algorithm_1():
+    """omega ~ U[0,1] picks the paper's moves with their probabilities (+ width)."""
+    S = pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=a) for a in (0.0, 2.0, -2.0)]))
+    C = np.zeros((K.MAXA, 0))
+    stats = np.zeros(2 * len(MOVE_NAMES), np.int64)
+    z = np.zeros(0)
+    n = 20000
+    K.run_chain(S.copy(), C, 0.0, 0.0, S.copy(), -np.inf, P, TAB.logPA, TAB.logPn, TAB.arm_const,
+                TAB.logqn, TAB.cumqn, z, z, z, z, np.zeros(0, np.bool_), z, z, z, z, n,
+                np.ones(n), 1, stats)
+    counts = stats[0::2] / n
+    p = np.array([CFG.p_rotate, CFG.p_shift, CFG.p_gap, CFG.p_arm / 2, CFG.p_arm / 2,
+                  CFG.p_lane, CFG.p_width])
+    p = p / p.sum()
+    assert np.all(np.abs(counts - p) < 0.015), (counts, p)

@@ -1,0 +1,144 @@
+"""Preprocessing (paper §II-A): Doppler direction, clutter filter, voxels, trajectory split."""
+
+import math
+
+import numpy as np
+
+from intersection_estimator.observations import Detections
+from intersection_estimator.preprocess import (PreprocessConfig, heading_observations,
+                                               initial_arm_angles, initial_center,
+                                               initial_lanes, preprocess, radar_observations,
+                                               seed_lines, tracked_observations, voxelise)
+
+from topology_scenes import easy_intersection, scene
+
+CFG = PreprocessConfig()
+
+
+def test_voxelise_counts_and_means_per_class():
+    xy = np.array([[0.1, 0.1], [0.5, 0.3], [0.2, 0.2], [5.0, 5.0], [-0.1, 0.0]])
+    cls = np.array([0, 0, 1, 0, 0])
+    vxy, vcls, cnt, _ = voxelise(xy, cls, 2.0)
+    got = sorted(zip(map(tuple, np.round(vxy, 6)), vcls.tolist(), cnt.tolist()))
+    assert got == sorted([((0.3, 0.2), 0, 2.0), ((0.2, 0.2), 1, 1.0), ((5.0, 5.0), 0, 1.0),
+                          ((-0.1, 0.0), 0, 1.0)])
+
+
+def test_straight_trajectory_splits_at_closest_point():
+    """A vehicle crossing straight through the center gives one entering and one leaving
+    part with the mean point on each side and the driving direction."""
+    x = np.arange(-50.0, 50.5, 1.0)
+    xy = np.stack([x, np.full_like(x, -1.75)], axis=1)
+    dets = Detections.make(xy, t=np.arange(len(x)) * 0.1, heading=0.0, track_id=7)
+    obs = tracked_observations(dets, (0.0, 0.0), CFG)
+    assert len(obs) == 2
+    i_in = int(np.argmin(obs.x))
+    assert obs.x[i_in] < -20 and obs.x[1 - i_in] > 20
+    assert np.allclose(obs.y, -1.75) and np.allclose(obs.hx, 1.0) and np.allclose(obs.hy, 0.0)
+    assert obs.d[i_in] == 1.0 and obs.d[1 - i_in] == -1.0     # entering, then leaving
+
+
+def test_turn_is_trimmed_from_the_part():
+    """Entering along +x toward the center, then turning left: the entering part's mean
+    stays on the straight lane (the arc inside the box is trimmed)."""
+    s = np.arange(60.0, 10.0, -1.0)
+    p_in = np.stack([s, np.full_like(s, 1.75)], axis=1)
+    phi = np.linspace(-math.pi / 2, 0.0, 20)
+    arc = np.stack([10.0 * np.cos(phi) + 0.0, 10.0 * np.sin(phi) + 11.75], axis=1)[::-1] * [1, 1]
+    arc = np.stack([10.0 - 10.0 * np.sin(np.linspace(0, math.pi / 2, 20)),
+                    1.75 + 10.0 * (1 - np.cos(np.linspace(0, math.pi / 2, 20)))], axis=1)
+    xy = np.concatenate([p_in, arc])
+    d = np.gradient(xy, axis=0)
+    dets = Detections.make(xy, t=np.arange(len(xy)) * 0.1, heading=np.arctan2(d[:, 1], d[:, 0]),
+                           track_id=1)
+    trimmed = tracked_observations(dets, (0.0, 0.0), CFG)
+    whole = tracked_observations(dets, (0.0, 0.0), PreprocessConfig(trim_turn_deg=0.0))
+    k = int(np.argmax(trimmed.x))
+    assert abs(trimmed.y[k] - 1.75) < 0.05 and abs(trimmed.hy[k]) < 0.05
+    assert abs(whole.y[int(np.argmax(whole.x))] - 1.75) > abs(trimmed.y[k] - 1.75)
+
+
+def test_static_false_tracks_are_dropped():
+    rng = np.random.default_rng(0)
+    xy = rng.normal([30.0, 5.0], 0.8, (4, 2))
+    dets = Detections.make(xy, t=np.arange(4) * 0.1, heading=rng.uniform(-3, 3, 4), track_id=99)
+    assert len(tracked_observations(dets, (0.0, 0.0), CFG)) == 0
+
+
+def _radar(xy, dop, sensor, rcs=10.0):
+    return Detections.make(np.asarray(xy, float), doppler=dop, sensor_xy=sensor, rcs=rcs)
+
+
+def test_doppler_direction_rule_with_line_of_sight():
+    """Sensor on the arm at (30, -1.75) looking toward the center at (0, 0)."""
+    sensor = (30.0, -1.75)
+    cfg = PreprocessConfig(voxel_size=0.5)
+    # ahead of the sensor (between sensor and center): moving toward the center = toward
+    # the sensor's look direction = away from the sensor -> doppler > 0 -> entering
+    ahead = radar_observations(_radar([[15.0, 1.75]], 5.0, sensor), (0.0, 0.0), cfg)
+    assert ahead.d.tolist() == [1.0]
+    # behind the sensor: the paper's rule flips
+    behind = radar_observations(_radar([[50.0, 1.75]], 5.0, sensor), (0.0, 0.0), cfg)
+    assert behind.d.tolist() == [-1.0]
+    # beyond the center on the opposite arm: moving away from the sensor = leaving
+    far = radar_observations(_radar([[-30.0, -1.75]], 5.0, sensor), (0.0, 0.0), cfg)
+    assert far.d.tolist() == [-1.0]
+    # cross traffic seen at a right angle: ambiguous, dropped
+    side = radar_observations(_radar([[15.0, 15.0]], 5.0, (30.0, 0.0)), (0.0, 0.0),
+                              PreprocessConfig(min_radial_cos=0.25))
+    assert len(side) == 0
+
+
+def test_radar_clutter_filter():
+    sensor = (30.0, 0.0)
+    dets = Detections.concat([_radar([[10.0, 2.0]], 0.1, sensor),           # static
+                              _radar([[10.0, 2.0]], 6.0, sensor, rcs=-10),  # weak
+                              _radar([[12.0, 2.0]], 6.0, sensor, rcs=np.nan),
+                              _radar([[14.0, 2.0]], 6.0, sensor)])
+    obs = radar_observations(dets, (0.0, 0.0), PreprocessConfig(voxel_size=1.0))
+    assert sorted(obs.x.round(1).tolist()) == [12.0, 14.0]
+
+
+def test_heading_detections_are_voxelised_with_their_heading():
+    xy = np.array([[20.0, 1.0], [20.4, 1.2], [20.2, 1.1], [-20.0, -1.0]])
+    h = np.array([2.9, 2.85, 2.95, math.pi])
+    obs = heading_observations(Detections.make(xy, heading=h), (0.0, 0.0),
+                               PreprocessConfig(voxel_size=2.0))
+    assert len(obs) == 2
+    k = int(np.argmax(obs.x))
+    assert obs.w[k] == 3.0 and abs(math.atan2(obs.hy[k], obs.hx[k]) - 2.9) < 1e-3
+    assert obs.d[k] == 1.0 and obs.d[1 - k] == -1.0   # toward / away from the center
+
+
+def test_initial_center_and_arms_from_driving_lines():
+    gt = easy_intersection(4, lanes=((2, 1), (1, 2), (1, 1), (2, 2)), center=(12.0, -7.0))
+    for mode in ('tracked', 'heading', 'raw'):
+        dets = scene(gt, mode, seed=1)
+        p, o, w = seed_lines(dets, CFG)
+        c = initial_center(p, o, w)
+        assert np.hypot(*(c - gt.center)) < 8.0, mode
+        ang = initial_arm_angles(p, o, w, c, math.radians(30), 6)
+        if mode != 'raw':
+            assert len(ang) == 4
+            for a in gt.arms:
+                assert min(abs((a.angle - b + math.pi) % (2 * math.pi) - math.pi) for b in ang) \
+                    < math.radians(5)
+
+
+def test_initial_lanes_recover_lane_counts():
+    gt = easy_intersection(4, lanes=((2, 1), (1, 3), (1, 1), (2, 2)), center=(0.0, 0.0),
+                           gap=1.0, width=3.25)
+    dets = scene(gt, 'tracked', seed=2)
+    obs = preprocess(dets, gt.center + 2.0, CFG)
+    c, params = initial_lanes(obs, gt.center + 2.0, [a.angle for a in gt.arms], 3.5, 6, 4.0,
+                              width_range=(2.75, 4.0))
+    assert np.hypot(*(c - gt.center)) < 0.5
+    assert [(p[1], p[2]) for p in params] == [(a.lanes_in, a.lanes_out) for a in gt.arms]
+
+
+def test_empty_and_degenerate_inputs():
+    empty = Detections.empty()
+    assert len(preprocess(empty, (0, 0), CFG)) == 0
+    assert initial_center(*seed_lines(empty, CFG)) is None
+    one = Detections.make([[1.0, 2.0]], heading=0.0, track_id=0)
+    assert len(preprocess(one, (0, 0), CFG)) == 0

@@ -1,0 +1,128 @@
+"""TopologyEstimator: the anytime API, exact topology on easy scenes, degenerate inputs."""
+
+import math
+
+import numpy as np
+import pytest
+
+from intersection_estimator.model import Intersection
+from intersection_estimator.observations import Detections
+from intersection_estimator.topology import TopologyConfig, TopologyEstimator
+
+from topology_scenes import easy_intersection, same_topology, scene
+
+
+def test_config_defaults_follow_the_paper_and_validate():
+    cfg = TopologyConfig().validate()
+    assert (cfg.p_rotate, cfg.p_shift, cfg.p_gap, cfg.p_arm, cfg.p_lane) == (0.4, 0.2, 0.1, 0.15, 0.15)
+    assert (cfg.rotate_max_deg, cfg.shift_max, cfg.gap_step) == (6.0, 6.0, 1.8)
+
+
+@pytest.mark.parametrize('field,value', [('p_rotate', -0.1), ('min_sep_deg', 0.0),
+                                         ('max_arms', 99), ('sigma_track', 0.0),
+                                         ('lane_width', 9.0), ('t_end', 100.0),
+                                         ('traffic_side', 0), ('voxel_size', 0.0)])
+def test_config_validate_names_the_parameter(field, value):
+    with pytest.raises(ValueError, match=field):
+        TopologyConfig(**{field: value}).validate()
+    with pytest.raises(ValueError, match=field):
+        TopologyEstimator(TopologyConfig(**{field: value}))
+
+
+EASY = [
+    easy_intersection(4, lanes=((1, 1), (2, 1), (1, 2), (2, 2)), gap=0.5),
+    easy_intersection(3, lanes=((1, 1), (2, 2), (1, 1)), angles_deg=[-100, 20, 150],
+                      center=(-40.0, 25.0), width=3.25),
+    easy_intersection(5, lanes=((1, 1), (1, 1), (2, 1), (1, 1), (1, 2)),
+                      angles_deg=[-170, -100, -20, 50, 120]),
+]
+
+
+@pytest.mark.parametrize('mode', ['tracked', 'heading', 'raw'])
+@pytest.mark.parametrize('k', range(len(EASY)))
+def test_easy_scenes_give_the_exact_topology(mode, k):
+    gt = EASY[k]
+    est = TopologyEstimator(TopologyConfig(), seed=11)
+    est.set_observations(scene(gt, mode, seed=k, clutter=20))
+    est.run(n_samples=5000)
+    assert same_topology(gt, est.best), (mode, k, est.best)
+    assert np.hypot(*(est.best.center - gt.center)) < 2.0
+    assert est.state in ('CONVERGING', 'CONVERGED')
+    assert all(0.0 <= a.confidence <= 1.0 for a in est.best.arms)
+
+
+def test_same_seed_same_result_and_seed_may_be_a_generator():
+    gt = EASY[0]
+    dets = scene(gt, 'raw', seed=4, clutter=30)
+    res = []
+    for seed in (3, 3, np.random.default_rng(3)):
+        est = TopologyEstimator(TopologyConfig(), seed=seed)
+        est.set_observations(dets)
+        est.run(n_samples=3000)
+        res.append((est.best.to_json(), est.best_log_posterior))
+    assert res[0] == res[1] == res[2]
+
+
+def test_anytime_run_by_time_budget_and_warm_start():
+    gt = EASY[1]
+    est = TopologyEstimator(TopologyConfig(), seed=0)
+    est.set_observations(scene(gt, 'tracked', seed=1))
+    n = est.run(time_budget_s=0.05)
+    assert n > 0 and est.samples_drawn == n
+    est.run(n_samples=3000)
+    before = est.samples_drawn
+    est.set_observations(scene(gt, 'tracked', seed=2))   # new window, same intersection
+    assert est.best is not None                            # the chain is kept
+    est.run(n_samples=1000)
+    assert est.samples_drawn == before + 1000
+    assert same_topology(gt, est.best)
+    with pytest.raises(ValueError):
+        est.run()
+
+
+def test_reset_forgets_everything():
+    est = TopologyEstimator(TopologyConfig(), seed=0)
+    est.set_observations(scene(EASY[0], 'tracked'))
+    est.run(n_samples=500)
+    est.reset()
+    assert est.best is None and est.samples_drawn == 0 and est.state == 'NO_DATA'
+
+
+@pytest.mark.parametrize('dets', [
+    Detections.empty(),
+    Detections.make(np.zeros((1, 2)), heading=0.0, track_id=0),
+    Detections.make(np.c_[np.arange(-40.0, 40.0), np.zeros(80)], t=np.arange(80) * 0.1,
+                    heading=0.0, track_id=0),                                   # one vehicle
+    Detections.make(np.random.default_rng(0).uniform(-50, 50, (300, 2)),
+                    doppler=np.random.default_rng(1).normal(0, 0.1, 300),
+                    sensor_xy=(0.0, 0.0), rcs=-5.0),                            # all clutter
+    Detections.make(np.c_[np.tile(np.arange(-40.0, 40.0), 5), np.repeat(np.arange(5.0), 80)],
+                    t=np.tile(np.arange(80) * 0.1, 5), heading=0.0,
+                    track_id=np.repeat(np.arange(5), 80)),                      # one direction
+    Detections.make(np.random.default_rng(2).uniform(-50, 50, (200, 2)),
+                    heading=np.random.default_rng(3).uniform(-3, 3, 200)),      # heading clutter
+], ids=['empty', 'one-row', 'one-vehicle', 'radar-clutter', 'one-direction', 'heading-clutter'])
+def test_degenerate_inputs_give_a_defined_state(dets):
+    est = TopologyEstimator(TopologyConfig(), seed=0)
+    est.set_observations(dets)
+    n = est.run(n_samples=1000)
+    assert est.state in ('NO_DATA', 'CONVERGING', 'CONVERGED')
+    if est.state == 'NO_DATA':
+        assert n == 0
+    else:
+        assert isinstance(est.best, Intersection) and math.isfinite(est.best_log_posterior)
+        assert 2 <= len(est.best.arms) <= 6
+
+
+def test_no_data_state():
+    est = TopologyEstimator(TopologyConfig(), seed=0)
+    assert est.state == 'NO_DATA' and est.best is None
+    assert est.run(n_samples=100) == 0
+    assert est.best_log_posterior == -math.inf
+
+
+def test_converged_state_after_enough_samples():
+    est = TopologyEstimator(TopologyConfig(anneal_samples=2000, converge_window=1500), seed=1)
+    est.set_observations(scene(EASY[0], 'tracked', seed=0))
+    est.run(n_samples=8000)
+    assert est.state == 'CONVERGED'
