@@ -75,19 +75,20 @@ def _connector_pairs(graph: LaneGraph, radius: float) -> list[tuple[int, int]]:
     if not len(g):
         return []
     R, L = graph.P[graph.ref[2 * g + 1]], graph.P[graph.ref[2 * g]]
-    pairs = cKDTree(R).query_ball_tree(cKDTree(L), radius)
-    cand = []
-    for x, js in enumerate(pairs):
-        for y in js:
-            ga, gb = g[x], g[y]
-            if graph.st_ll[ga] == graph.st_ll[gb] or graph.st_normal[ga] @ graph.st_normal[gb] <= 0.9:
-                continue
-            cand.append((float(np.linalg.norm(R[x] - L[y])), 2 * ga + 1, 2 * gb))
+    D = cKDTree(R).sparse_distance_matrix(cKDTree(L), radius, output_type='ndarray')
+    if not len(D):
+        return []
+    x, y, dist = D['i'], D['j'], D['v']
+    ga, gb = g[x], g[y]
+    ok = (graph.st_ll[ga] != graph.st_ll[gb]) & \
+        ((graph.st_normal[ga] * graph.st_normal[gb]).sum(1) > 0.9)
+    order = np.argsort(dist[ok], kind='stable')
+    cand = zip(2 * ga[ok][order] + 1, 2 * gb[ok][order])
     used, out = set(), []
-    for _, sa, sb in sorted(cand):
+    for sa, sb in cand:
         if sa not in used and sb not in used:
             used.update((sa, sb))
-            out.append((sa, sb))
+            out.append((int(sa), int(sb)))
     return out
 
 

@@ -253,15 +253,26 @@ def fit_frames(topo: Intersection, trajs: list[Trajectory], stops: np.ndarray,
     return frames
 
 
-def _extent(trajs, frame: ArmFrame, ai, d, stop, cfg, length):
+def _farthest(trajs, frames) -> dict:
+    """(arm, direction) -> farthest projection of an assigned part's point on the arm."""
+    far: dict = {}
+    for tr in trajs:
+        for d, lane in ((ENTERING, tr.lane_in), (LEAVING, tr.lane_out)):
+            if lane is not None:
+                f = frames[lane[0]]
+                P = _part_points(tr, d)
+                if len(P):
+                    v = float(np.max((P - f.origin) @ f.u))
+                    far[(lane[0], d)] = max(far.get((lane[0], d), -np.inf), v)
+    return far
+
+
+def _extent(far: dict, ai, d, stop, cfg, length):
     """Lanelet length of arm ``ai`` direction ``d``: covers its trajectory points."""
     if length is not None:
         return float(length)
-    s = [(_part_points(tr, d) - frame.origin) @ frame.u
-         for tr in trajs if (tr.lane_in if d == ENTERING else tr.lane_out) is not None
-         and (tr.lane_in if d == ENTERING else tr.lane_out)[0] == ai]
-    far = max((float(np.max(x)) for x in s if len(x)), default=stop + cfg.arm_length_min)
-    return float(np.clip(far - stop, cfg.arm_length_min, cfg.arm_length_max))
+    v = far.get((ai, d), stop + cfg.arm_length_min)
+    return float(np.clip(v - stop, cfg.arm_length_min, cfg.arm_length_max))
 
 
 def _border_positions(lat: list[float], width: float) -> np.ndarray:
@@ -280,6 +291,7 @@ def _border_positions(lat: list[float], width: float) -> np.ndarray:
 def _straight_lanes(topo, frames, stops, trajs, cfg, length):
     """Entering/leaving specs and the interior neighbour pairs of each arm."""
     specs, pairs, index = [], [], {}
+    far = _farthest(trajs, frames) if length is None else {}
     for ai, a in enumerate(topo.arms):
         f = frames[ai]
         for d in (ENTERING, LEAVING):
@@ -287,7 +299,7 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
             if n_lanes <= 0:
                 continue
             b = _border_positions([f.lat[(d, k)] for k in range(n_lanes)], f.width)
-            ext = _extent(trajs, f, ai, d, stops[ai], cfg, length)
+            ext = _extent(far, ai, d, stops[ai], cfg, length)
             n_st = max(2, int(round(ext / cfg.station_spacing)) + 1)
             s = np.linspace(stops[ai], stops[ai] + ext, n_st)
             if d == ENTERING:

@@ -88,11 +88,14 @@ class LaneGraph:
         self.rebuild_users()
 
     def rebuild_users(self) -> None:
-        self.nusers[:] = 0
+        """users[p, :nusers[p]] = the slots referencing point p."""
+        order = np.argsort(self.ref, kind='stable')
+        p = self.ref[order]
+        counts = np.bincount(self.ref, minlength=len(self.P))
+        rank = np.arange(len(p)) - (np.cumsum(counts) - counts)[p]
         self.users[:] = -1
-        for s, p in enumerate(self.ref):
-            self.users[p, self.nusers[p]] = s
-            self.nusers[p] += 1
+        self.users[p, rank] = order
+        self.nusers[:] = counts
 
     def lanelets(self) -> list[Lanelet]:
         """Export as :class:`model.Lanelet` (center line with doubled discretisation)."""
@@ -178,13 +181,12 @@ def build_graph(specs: list[LaneletSpec], pairs: list[tuple], users_cap: int = 0
                 prev_dummy = sp.successor
                 next_st[o + n - 1] = g.st_off[prev_dummy] + 1
     g.prev_st, g.next_st = prev_st, next_st
-    slot = lambda t: 2 * (g.st_off[t[0]] + t[1]) + t[2]  # noqa: E731
-    g.pair_a = np.array([slot(a) for a, _, _ in pairs], np.int64)
-    g.pair_b = np.array([slot(b) for _, b, _ in pairs], np.int64)
+    A = np.array([a for a, _, _ in pairs], np.int64).reshape(-1, 3)
+    B = np.array([b for _, b, _ in pairs], np.int64).reshape(-1, 3)
+    g.pair_a = 2 * (g.st_off[A[:, 0]] + A[:, 1]) + A[:, 2]
+    g.pair_b = 2 * (g.st_off[B[:, 0]] + B[:, 1]) + B[:, 2]
     g.pair_merged = np.array([bool(m) for _, _, m in pairs], np.bool_)
-    for k in range(len(pairs)):
-        if g.pair_merged[k]:
-            g.ref[g.pair_b[k]] = g.ref[g.pair_a[k]]
+    g.ref[g.pair_b[g.pair_merged]] = g.ref[g.pair_a[g.pair_merged]]
     counts = np.bincount(g.home, minlength=len(g.P)) if len(g.home) else np.zeros(len(g.P), int)
     cap = max(int(counts.max(initial=0)) + 2, users_cap, 4)
     g.users = np.full((len(g.P), cap), -1, np.int64)

@@ -25,7 +25,7 @@ from .likelihood import seg_dist2
 
 __all__ = ['fit_stops', 'path_cost', 'complete_partial']
 
-_NB = 16          # Bezier samples per path
+_NB = 12          # Bezier samples per path
 _EXT = 25.0       # straight extension before/after the connector [m]
 
 
@@ -89,7 +89,13 @@ def fit_stops(topo, frames, trajs, stops0: np.ndarray, search: float, step: floa
     off_in = np.array([frames[t.lane_in[0]].lat[(ENTERING, t.lane_in[1])] for t in rows])
     off_out = np.array([frames[t.lane_out[0]].lat[(LEAVING, t.lane_out[1])] for t in rows])
     arms = frames
-    near = [t.xy[np.linalg.norm(t.xy - topo.center, axis=1) < radius] for t in rows]
+    # points on the straight parts farther out than any candidate stop line cost the
+    # same for every candidate: keep the turn and a margin around the stop lines
+    reach = search + 3.0
+    near = [t.xy[(np.linalg.norm(t.xy - topo.center, axis=1) < radius)
+                 & ((t.xy - O[a]) @ U[a] < stops0[a] + reach)
+                 & ((t.xy - O[b]) @ U[b] < stops0[b] + reach)]
+            for t, a, b in zip(rows, arm_in, arm_out)]
     pptr = np.concatenate([[0], np.cumsum([len(x) for x in near])]).astype(np.int64)
     pts = np.concatenate(near) if pptr[-1] else np.zeros((0, 2))
     coarse = np.arange(-search, search + 1e-9, 4 * step)
