@@ -20,6 +20,7 @@ _RANGES = {
     'stop_sweeps': (1, 20, 'coordinate-descent sweeps over the arms in the stop fit'),
     'refit_lanes': (0, 10, 'rounds of re-fitting arm directions and lane positions to the traffic '
                     'and re-assigning the trajectory parts'),
+    'fit_margin': (0.0, 100.0, 'lane re-fit uses part points this far beyond the stop line [m]'),
     'min_fit_points': (2, 10**6, 'fewest points to re-fit an arm direction'),
     'max_refit_angle_deg': (0.0, 90.0, 'largest accepted change of an arm direction [deg]'),
     'lane_prior_points': (0.0, 1e6, 'pseudo points of the topology lane position in the re-fit'),
@@ -83,9 +84,10 @@ class LaneConfig:
     stop_clip: float = 2.0
     stop_sweeps: int = 2
     refit_lanes: int = 1
+    fit_margin: float = 0.0
     min_fit_points: int = 20
     max_refit_angle_deg: float = 10.0
-    lane_prior_points: float = 10.0
+    lane_prior_points: float = 30.0
     complete_partial: int = 1
     complete_min_points: int = 5
     complete_max_cost: float = 1.5

@@ -215,9 +215,10 @@ def fit_frames(topo: Intersection, trajs: list[Trajectory], stops: np.ndarray,
 
     The topology step treats lanes as rays with one width per arm; its angle and
     center errors shift the lanes sideways. Per arm we take the principal direction
-    of the pooled part points (each lane's mean removed) beyond the stop line, and per
-    lane the mean lateral position, shrunk towards the topology's lane position moved
-    by the arm's mean shift (``lane_prior_points`` pseudo points).
+    of the pooled part points (each lane's mean removed) ``fit_margin`` beyond the stop
+    line (clear of the turns even if the stop line is off), and per
+    lane the mean lateral position, shrunk towards a line across the lanes of that
+    direction (:func:`_fit_lane_positions`, ``lane_prior_points`` pseudo points).
     """
     frames = arm_frames(topo)
     groups: dict = {}
@@ -227,7 +228,7 @@ def fit_frames(topo: Intersection, trajs: list[Trajectory], stops: np.ndarray,
                 continue
             a, k = lane
             P = _part_points(tr, d)
-            P = P[(P - topo.center) @ frames[a].u > stops[a]]
+            P = P[(P - topo.center) @ frames[a].u > stops[a] + cfg.fit_margin]
             if len(P):
                 groups.setdefault(a, {}).setdefault((d, k), []).append(P)
     for a, lanes in groups.items():
@@ -241,16 +242,36 @@ def fit_frames(topo: Intersection, trajs: list[Trajectory], stops: np.ndarray,
                 f.u, f.n = u, np.array([-u[1], u[0]])
         obs = {key: float(np.mean((P - f.origin) @ f.n)) for key, P in pts.items()}
         cnt = {key: len(P) for key, P in pts.items()}
-        tot = sum(cnt.values())
-        shift = sum(cnt[k] * (obs[k] - f.lat[k]) for k in obs) / tot if tot else 0.0
-        n0 = cfg.lane_prior_points
-        for key in f.lat:
-            prior = f.lat[key] + shift
-            if key in obs:
-                f.lat[key] = (cnt[key] * obs[key] + n0 * prior) / (cnt[key] + n0)
-            else:
-                f.lat[key] = prior
+        for d in (ENTERING, LEAVING):
+            _fit_lane_positions(f, d, obs, cnt, cfg.lane_prior_points)
     return frames
+
+
+def _fit_lane_positions(f: ArmFrame, d: int, obs: dict, cnt: dict, n0: float) -> None:
+    """Lane positions of one direction of an arm: line ``lat_k = alpha + beta k`` fitted
+    to the lanes' mean lateral positions (weights = point counts; one observed lane
+    fits only ``alpha`` with the topology's spacing), each lane then shrunk towards
+    the line with ``n0`` pseudo points. Lanes without points sit on the line."""
+    keys = sorted(k for k in f.lat if k[0] == d)
+    if not keys:
+        return
+    ks = np.array([k for _, k in keys], float)
+    prior = np.array([f.lat[key] for key in keys])
+    seen = [i for i, key in enumerate(keys) if key in obs]
+    if not seen:
+        return
+    y = np.array([obs[keys[i]] for i in seen])
+    w = np.array([cnt[keys[i]] for i in seen], float)
+    beta = (prior[-1] - prior[0]) / (ks[-1] - ks[0]) if len(keys) > 1 else 0.0
+    if len(seen) >= 2 and np.ptp(ks[seen]) > 0:
+        A = np.stack([np.ones(len(seen)), ks[seen]], axis=1) * np.sqrt(w)[:, None]
+        alpha, beta = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)[0]
+    else:
+        alpha = float(np.sum(w * (y - beta * ks[seen])) / w.sum())
+    line = alpha + beta * ks
+    for i, key in enumerate(keys):
+        f.lat[key] = (cnt[key] * obs[key] + n0 * line[i]) / (cnt[key] + n0) if key in obs \
+            else float(line[i])
 
 
 def _farthest(trajs, frames) -> dict:
