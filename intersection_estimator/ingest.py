@@ -10,13 +10,15 @@ that jump or run backwards.
 from __future__ import annotations
 
 from collections import Counter, deque
+from dataclasses import replace
+import math
 import time
 
 import numpy as np
 
 from msg_adapters.detections import AdapterOptions, to_detections
 from msg_adapters.errors import AdapterError
-from msg_adapters.odometry import EgoPoseBuffer
+from msg_adapters.odometry import EgoPose, EgoPoseBuffer, read_odometry
 
 from . import params as P
 
@@ -34,7 +36,10 @@ ROLE_TYPES = {
 
 PENDING_MAX = 256        # messages held back waiting for the ego pose
 JUMP_S = 30.0            # a stamp this far from the time base is suspicious
-JUMP_CONFIRM = 5         # ... and accepted as a new time base after this many in a row
+JUMP_CONFIRM = 5         # ... and accepted as a new time base after this many consistent ones in a row
+MAX_COORD = 1e7          # |x|, |y| beyond this [m] is no place in a metric map frame (UTM northing < 1e7)
+MAX_EGO_SPEED = 100.0    # [m/s] odometry implying more than this is an ego jump (confirmed like a time jump)
+EGO_SLACK = 2.0          # [m] position noise allowed on top of MAX_EGO_SPEED * dt
 
 
 class RateLimitedLog:
@@ -66,7 +71,8 @@ class Ingest:
         self._warnings: list[tuple[str, str]] = []
         self._pending: deque = deque(maxlen=PENDING_MAX)
         self.latest_stamp: float | None = None
-        self._jumps = 0
+        self._jumps, self._jump_to = 0, None       # time jump: count of consistent stamps, last one
+        self._ego_jumps: list[EgoPose] = []        # ego jump candidates, consistent among themselves
         self.configure(values)
         self.ego = EgoPoseBuffer(fixed_frame=values['fixed_frame'])
 
@@ -102,14 +108,18 @@ class Ingest:
         self.received[role] += 1
         try:
             stamp = self._check_stamp(msg, estimator)
-            dets = to_detections(msg, self.ego, self.opts)
+            if role == 'odometry_topic':
+                self._add_pose(read_odometry(msg))
+                dets = None
+            else:
+                dets = self._clean(role, to_detections(msg, self.ego, self.opts))
         except AdapterError as exc:
             if exc.reason == 'no_ego_pose' and self._waits_for_pose(msg):
                 self._hold(role, msg)
                 return 0
             return self.drop(exc.reason, f'{role}: dropped a message: {exc}')
-        added = estimator.add(dets) if len(dets) else 0
-        if len(dets) > added:
+        added = estimator.add(dets) if dets is not None and len(dets) else 0
+        if dets is not None and len(dets) > added:
             self.dropped['non_finite'] += len(dets) - added
         self.latest_stamp = stamp if self.latest_stamp is None else max(self.latest_stamp, stamp)
         if role == 'odometry_topic' and self._pending:
@@ -148,18 +158,75 @@ class Ingest:
         if not np.isfinite(stamp):
             raise AdapterError('non_finite', 'stamp is not finite')
         if self.latest_stamp is not None and abs(stamp - self.latest_stamp) > JUMP_S:
-            self._jumps += 1
+            # only stamps that agree with each other confirm a new time base: random garbage
+            # stamps in a row must not make the node forget everything
+            consistent = self._jump_to is not None and abs(stamp - self._jump_to) <= JUMP_S
+            self._jumps = self._jumps + 1 if consistent else 1
+            self._jump_to = stamp
             if self._jumps < JUMP_CONFIRM:
                 raise AdapterError('stamp_jump', f'stamp {stamp:.3f} s is {stamp - self.latest_stamp:+.1f} s '
                                    'from the time base')
             self.warn('time_base_reset', f'time base moved to {stamp:.3f} s: forgetting older data')
-            self.latest_stamp, self._jumps = stamp, 0
+            self.latest_stamp, self._jumps, self._jump_to = stamp, 0, None
+            self._ego_jumps.clear()
             self.ego.clear()
             self._pending.clear()
             estimator.reset()
         else:
-            self._jumps = 0
+            self._jumps, self._jump_to = 0, None
         return stamp
+
+    # -- plausibility ----------------------------------------------------------------------------
+    def _clean(self, role: str, dets):
+        """Drop detections with absurd (finite) coordinates (they would overflow the estimator)
+        and all but the first object of a track id that occurs twice in one message."""
+        far = ~(np.abs(dets.xy) <= MAX_COORD).all(axis=1) & np.isfinite(dets.xy).all(axis=1)
+        if far.any():
+            self.drop('out_of_range', f'{role}: dropped {int(far.sum())} detection(s) beyond '
+                      f'{MAX_COORD:g} m from the origin of the fixed frame')
+            dets = dets.subset(~far)
+        ids = dets.track_id
+        if len(ids) > 1 and (ids >= 0).any():
+            first = np.zeros(len(ids), bool)
+            first[np.unique(ids, return_index=True)[1]] = True
+            dup = ~first & (ids >= 0)
+            if dup.any():
+                self.drop('duplicate_id', f'{role}: dropped {int(dup.sum())} object(s) whose track id '
+                          'occurs twice in one message')
+                dets = dets.subset(~dup)
+        return dets
+
+    def _add_pose(self, pose: EgoPose) -> None:
+        """Add an ego pose unless it is absurd, or a jump that the next poses do not confirm.
+
+        A single glitch (a pose kilometres away, or seconds back in time) would otherwise make
+        the node believe the ego has passed the intersection and forget what it saw. A real
+        relocalisation is accepted after JUMP_CONFIRM consistent poses (the buffer restarts).
+        """
+        if pose.frame_id and pose.frame_id != self.ego.fixed_frame:
+            raise AdapterError('frame_mismatch', f'odometry in {pose.frame_id!r}, fixed frame is '
+                                                 f'{self.ego.fixed_frame!r}')
+        if not (abs(pose.x) <= MAX_COORD and abs(pose.y) <= MAX_COORD):
+            raise AdapterError('out_of_range', f'ego pose ({pose.x:g}, {pose.y:g}) beyond {MAX_COORD:g} m')
+        twist = (pose.vx, pose.vy, pose.yaw_rate)
+        if not all(math.isfinite(v) and abs(v) <= 1e3 for v in twist):
+            pose = replace(pose, vx=0.0, vy=0.0, yaw_rate=0.0)    # cleaned: extrapolate without it
+        latest = self.ego.latest
+        if latest is None or _plausible(latest, pose):
+            self._ego_jumps.clear()
+            self.ego.add(pose)
+            return
+        if not (self._ego_jumps and _plausible(self._ego_jumps[-1], pose)):
+            self._ego_jumps.clear()
+        self._ego_jumps.append(pose)
+        if len(self._ego_jumps) < JUMP_CONFIRM:
+            raise AdapterError('ego_jump', f'ego pose ({pose.x:.1f}, {pose.y:.1f}) at {pose.stamp:.3f} s is '
+                               f'not reachable from ({latest.x:.1f}, {latest.y:.1f}) at {latest.stamp:.3f} s')
+        self.warn('ego_relocalised', f'ego pose jumped to ({pose.x:.1f}, {pose.y:.1f}): restarting the pose buffer')
+        self.ego.clear()
+        for p in self._ego_jumps:
+            self.ego.add(p)
+        self._ego_jumps.clear()
 
     def _waits_for_pose(self, msg) -> bool:
         latest = self.ego.latest
@@ -179,7 +246,7 @@ class Ingest:
                 self._pending.append((role, msg))
                 continue
             try:
-                dets = to_detections(msg, self.ego, self.opts)
+                dets = self._clean(role, to_detections(msg, self.ego, self.opts))
             except AdapterError as exc:
                 self.drop(exc.reason, f'{role}: dropped a held-back message: {exc}')
                 continue
@@ -194,6 +261,12 @@ class Ingest:
     def forget_before(self, t: float) -> None:
         """After a reset: drop held-back messages older than ``t``."""
         self._pending = deque(((r, m) for r, m in self._pending if self._stamp(m) >= t), maxlen=PENDING_MAX)
+
+
+def _plausible(a: EgoPose, b: EgoPose) -> bool:
+    """Can the ego get from pose ``a`` to pose ``b`` (not far back in time, not too fast)?"""
+    dt = b.stamp - a.stamp
+    return dt >= -1.0 and math.hypot(b.x - a.x, b.y - a.y) <= MAX_EGO_SPEED * abs(dt) + EGO_SLACK
 
 
 def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None):
