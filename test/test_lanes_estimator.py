@@ -29,8 +29,10 @@ def test_deterministic_per_seed():
     for x, y in zip(a, b):
         np.testing.assert_array_equal(x.center, y.center)
         np.testing.assert_array_equal(x.left, y.left)
-    c = _run(8).lanelets
-    assert any(not np.array_equal(x.center, y.center) for x, y in zip(a, c))
+    # the chain itself depends on the seed (final states, not the best-state snapshot)
+    hot = LaneConfig(keep_best=0, temp_start=1.0, temp_end=1.0)
+    c, d = _run(7, cfg=hot), _run(8, cfg=hot)
+    assert not np.array_equal(c.graph.P, d.graph.P)
 
 
 def test_generator_seed_and_samples_drawn():
