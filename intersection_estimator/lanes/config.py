@@ -40,6 +40,7 @@ _RANGES = {
     'assign_gate': (0.1, 50.0, 'largest distance of a part mean to its lane center line [m]'),
     'min_connector_evidence': (1, 1000, 'trajectories needed to create a connector'),
     'point_gate': (0.1, 50.0, 'trajectory points farther from their lane sequence are ignored [m]'),
+    'window_segments': (1, 2, 'center-line segments a point is scored against (nearest [+ next])'),
     'sigma_perp': (0.01, 10.0, 'std of d_perp in the likelihood [m] (paper §III-C)'),
     'outlier_weight': (0.0, 1.0, 'weight of a uniform outlier component per point'),
     'sigma_delta': (1e-3, 10.0, 'std of the smoothness delta_l per lanelet [rad] (paper §III-C)'),
@@ -104,6 +105,7 @@ class LaneConfig:
     assign_gate: float = 6.0
     min_connector_evidence: int = 1
     point_gate: float = 6.0
+    window_segments: int = 1
     sigma_perp: float = 1.0
     outlier_weight: float = 0.0
     sigma_delta: float = 0.15

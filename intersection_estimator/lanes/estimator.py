@@ -188,7 +188,8 @@ class LaneCourseEstimator:
     def _assign(self):
         g = self.graph
         self._Q, self._lo, self._hi, _ = assign_points(g.centers(), g.st_off, g.st_n,
-                                                       self._seqs, self.config.point_gate)
+                                                       self._seqs, self.config.point_gate,
+                                                       self.config.window_segments)
         return self._Q, self._lo, self._hi
 
     def _setup_likelihood(self) -> None:

@@ -5,9 +5,10 @@ leaving lanelet), so the sum over lanes ``sum_l 1(t_i, l)`` has one term and
 
     log P(t_i | I_2) = sum_{p in t_i} log N(d_perp(p, M_l); 0, sigma_perp)
 
-with ``M_l`` the center line of the sequence. Each point keeps a window of two
-center-line segments around its nearest one (``win_lo``..``win_hi`` stations), so a
-move re-scores only the points whose window touches a changed center point.
+with ``M_l`` the center line of the sequence. Each point keeps a window of one
+(``window_segments``) or two center-line segments -- its nearest one at assignment --
+(``win_lo``..``win_hi`` stations), so a move re-scores only the points whose window
+touches a changed center point.
 Points farther than ``point_gate`` from their sequence are dropped at assignment; an
 optional uniform outlier weight makes the term robust: ``log(exp(-d^2/2s^2) + eps)``
 (``eps = 0``: the plain Gaussian, cheapest).
@@ -77,7 +78,7 @@ def station_csr(n_stations: int, lo: np.ndarray, hi: np.ndarray):
 
 
 @njit(cache=True)
-def _assign_nb(C, st_off, st_n, tptr, pts, lptr, lanes, gate2, lo, hi, ll, keep):
+def _assign_nb(C, st_off, st_n, tptr, pts, lptr, lanes, gate2, nseg, lo, hi, ll, keep):
     for i in range(len(tptr) - 1):
         for q in range(tptr[i], tptr[i + 1]):
             px, py = pts[q, 0], pts[q, 1]
@@ -96,19 +97,22 @@ def _assign_nb(C, st_off, st_n, tptr, pts, lptr, lanes, gate2, lo, hi, ll, keep)
             dx, dy = C[bg + 1, 0] - C[bg, 0], C[bg + 1, 1] - C[bg, 1]
             t = ((px - C[bg, 0]) * dx + (py - C[bg, 1]) * dy) / max(dx * dx + dy * dy, 1e-18)
             first, last = st_off[bl], st_off[bl] + st_n[bl] - 1
+            if nseg == 1:
+                lo[q], hi[q] = bg, bg + 1
+                continue
             a = bg - 1 if t < 0.5 else bg
             a = max(first, min(a, last - 2))
             lo[q] = a
             hi[q] = min(last, a + 2)
 
 
-def assign_points(C: np.ndarray, st_off, st_n, seqs: list, gate: float):
+def assign_points(C: np.ndarray, st_off, st_n, seqs: list, gate: float, nseg: int = 2):
     """Nearest segment of each trajectory point within its lane sequence.
 
     ``seqs``: list of (points (m, 2), [lanelet indices]). Returns the kept points
     ``Q`` (k, 2), their window ``win_lo``/``win_hi`` (global station indices: the
-    nearest segment and its neighbour towards the foot point, within the lanelet) and
-    lanelet ``q_ll``.
+    nearest segment, with ``nseg=2`` also its neighbour towards the foot point, within
+    the lanelet) and lanelet ``q_ll``.
     """
     seqs = [(p, l) for p, l in seqs if len(p) and len(l)]
     if not seqs:
@@ -122,5 +126,5 @@ def assign_points(C: np.ndarray, st_off, st_n, seqs: list, gate: float):
     lo, hi, ll = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
     keep = np.zeros(n, np.bool_)
     _assign_nb(np.ascontiguousarray(C), np.asarray(st_off, np.int64), np.asarray(st_n, np.int64),
-               tptr, pts, lptr, lanes, gate * gate, lo, hi, ll, keep)
+               tptr, pts, lptr, lanes, gate * gate, nseg, lo, hi, ll, keep)
     return pts[keep], lo[keep], hi[keep], ll[keep]
