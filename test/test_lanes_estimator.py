@@ -145,3 +145,23 @@ def test_lanelets_from_topology():
         a = topo.arms[l.arm]
         v = (l.center[-1] - l.center[0]) / 50.0
         assert np.allclose(v, -a.direction if l.kind == 'entering' else a.direction)
+
+
+def test_connector_initial_shape_is_the_arc_bezier():
+    """Connectors start on the arc-like Bezier tangent to their lanes (equidistant stations)."""
+    from intersection_estimator.lanes.init import arc_bezier
+    from intersection_estimator.evaluate import orthogonal_distances
+    topo, _, _, dets = CASE
+    est = LaneCourseEstimator(LaneConfig(stop_fit=0), 0)
+    est.initialise(topo, dets)
+    ls = {l.id: l for l in est.lanelets}
+    for c in (l for l in ls.values() if l.kind == 'connector'):
+        e = next(l for l in ls.values() if c.id in l.successors)
+        o = ls[c.successors[0]]
+        t0 = e.center[-1] - e.center[-2]
+        t1 = o.center[1] - o.center[0]
+        ref = arc_bezier(e.center[-1], t0 / np.linalg.norm(t0), o.center[0],
+                         t1 / np.linalg.norm(t1), np.linspace(0, 1, 400))
+        assert np.nanmax(orthogonal_distances(c.center, ref)) < 0.02
+        step = np.linalg.norm(np.diff(c.center[::2], axis=0), axis=1)
+        assert step.max() - step.min() < 0.1 * step.mean()

@@ -11,7 +11,7 @@ _RANGES = {
     'station_spacing': (0.5, 20.0, 'distance between border support points [m]'),
     'connector_spacing': (0.2, 20.0, 'distance between connector support points [m]'),
     'connector_min_stations': (3, 1000, 'fewest support points of a connector'),
-    'connector_hermite': (0, 1, '1: connectors start as arc-like cubic Bezier curves tangent to '
+    'connector_arc': (0, 1, '1: connectors start as arc-like cubic Bezier curves tangent to '
                           'their lanes, 0: straight (paper)'),
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
@@ -78,7 +78,7 @@ class LaneConfig:
     station_spacing: float = 2.5
     connector_spacing: float = 1.0
     connector_min_stations: int = 6
-    connector_hermite: int = 1
+    connector_arc: int = 1
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25

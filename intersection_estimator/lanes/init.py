@@ -364,43 +364,70 @@ def arc_bezier(p0, t0, p1, t1, s):
             + s ** 3 * p1)
 
 
+@njit(cache=True)
+def _connector_geometry(L0, R0, L1, R1, t0, t1, arc_shape, spacing, min_st):
+    """Left/right borders of a connector (see :func:`_connector_borders`)."""
+    c0, c1 = 0.5 * (L0 + R0), 0.5 * (L1 + R1)
+    chord = math.hypot(c1[0] - c0[0], c1[1] - c0[1])
+    h = 0.0
+    if arc_shape:
+        phi = math.acos(min(1.0, max(-1.0, t0[0] * t1[0] + t0[1] * t1[1])))
+        ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
+        h = chord * min(ratio, 0.5)
+    q0, q1 = c0 + h * t0, c1 - h * t1         # h = 0: the straight chord
+    m = 64
+    s = np.linspace(0.0, 1.0, m)
+    arc = np.zeros(m)
+    px, py = c0[0], c0[1]
+    for i in range(1, m):
+        u = s[i]
+        a, b, c, d = (1 - u) ** 3, 3 * (1 - u) ** 2 * u, 3 * (1 - u) * u ** 2, u ** 3
+        x = a * c0[0] + b * q0[0] + c * q1[0] + d * c1[0]
+        y = a * c0[1] + b * q0[1] + c * q1[1] + d * c1[1]
+        arc[i] = arc[i - 1] + math.hypot(x - px, y - py)
+        px, py = x, y
+    n = max(min_st, int(round(max(arc[-1], chord) / spacing)) + 1)
+    q = np.interp(np.linspace(0.0, arc[-1], n), arc, s)
+    left, right = np.empty((n, 2)), np.empty((n, 2))
+    for i in range(n):
+        u = q[i]
+        a, b, c, d = (1 - u) ** 3, 3 * (1 - u) ** 2 * u, 3 * (1 - u) * u ** 2, u ** 3
+        cx = a * c0[0] + b * q0[0] + c * q1[0] + d * c1[0]
+        cy = a * c0[1] + b * q0[1] + c * q1[1] + d * c1[1]
+        tx = 3 * (1 - u) ** 2 * (q0[0] - c0[0]) + 6 * (1 - u) * u * (q1[0] - q0[0]) \
+            + 3 * u ** 2 * (c1[0] - q1[0])
+        ty = 3 * (1 - u) ** 2 * (q0[1] - c0[1]) + 6 * (1 - u) * u * (q1[1] - q0[1]) \
+            + 3 * u ** 2 * (c1[1] - q1[1])
+        tn = max(math.hypot(tx, ty), 1e-12)
+        nx, ny = -ty / tn, tx / tn
+        wl = math.hypot((1 - u) * (L0[0] - c0[0]) + u * (L1[0] - c1[0]),
+                        (1 - u) * (L0[1] - c0[1]) + u * (L1[1] - c1[1]))
+        wr = math.hypot((1 - u) * (R0[0] - c0[0]) + u * (R1[0] - c1[0]),
+                        (1 - u) * (R0[1] - c0[1]) + u * (R1[1] - c1[1]))
+        left[i, 0], left[i, 1] = cx + wl * nx, cy + wl * ny
+        right[i, 0], right[i, 1] = cx - wr * nx, cy - wr * ny
+    left[0], right[0], left[n - 1], right[n - 1] = L0, R0, L1, R1
+    return left, right
+
+
 def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
     """Borders of a connector from the end of ``E`` to the start of ``O``.
 
-    Straight (paper §III-A) or, with ``connector_hermite``, a circular-arc-like cubic
-    Bezier center line tangent to both lanes (``arc_bezier``); equidistant stations, end points exactly those of the
-    lanes (they are shared)."""
+    Straight (paper §III-A) or, with ``connector_arc``, a circular-arc-like cubic
+    Bezier center line tangent to both lanes (``arc_bezier``); equidistant stations
+    (``connector_spacing``), half widths blended from the end cross sections along
+    the curve's normal, end points exactly those of the lanes (they are shared)."""
     L0, R0, L1, R1 = E.left[-1], E.right[-1], O.left[0], O.right[0]
-    c0, c1 = 0.5 * (L0 + R0), 0.5 * (L1 + R1)
-    chord = float(np.linalg.norm(c1 - c0))
-    s = np.linspace(0.0, 1.0, 64)
-    if cfg.connector_hermite and len(E.left) >= 2 and len(O.left) >= 2:
-        t0 = 0.5 * (E.left[-1] + E.right[-1]) - 0.5 * (E.left[-2] + E.right[-2])
-        t1 = 0.5 * (O.left[1] + O.right[1]) - 0.5 * (O.left[0] + O.right[0])
-        t0, t1 = t0 / max(np.linalg.norm(t0), 1e-9), t1 / max(np.linalg.norm(t1), 1e-9)
-        c = arc_bezier(c0, t0, c1, t1, s)
-    else:
-        c = (1 - s[:, None]) * c0 + s[:, None] * c1
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
-    n_st = max(cfg.connector_min_stations, int(round(max(arc[-1], chord) / cfg.connector_spacing)) + 1)
-    q = np.interp(np.linspace(0.0, arc[-1], n_st), arc, s)
-    w = q[:, None]
-    # borders: the end cross sections blended along the curve, kept perpendicular-ish
-    cc = c0 + 0 * w if arc[-1] < 1e-9 else np.stack(
-        [np.interp(q, s, c[:, 0]), np.interp(q, s, c[:, 1])], axis=1)
-    hl = (1 - w) * (L0 - c0) + w * (L1 - c1)
-    hr = (1 - w) * (R0 - c0) + w * (R1 - c1)
-    left, right = cc + hl, cc + hr
-    if arc[-1] >= 1e-9:
-        t = np.gradient(cc, axis=0)
-        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-        nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)
-        wl = np.linalg.norm(hl, axis=1)
-        wr = np.linalg.norm(hr, axis=1)
-        left[1:-1] = cc[1:-1] + wl[1:-1, None] * nrm[1:-1]
-        right[1:-1] = cc[1:-1] - wr[1:-1, None] * nrm[1:-1]
-    left[0], right[0], left[-1], right[-1] = L0, R0, L1, R1
-    return left, right
+    t0 = 0.5 * (E.left[-1] + E.right[-1]) - 0.5 * (E.left[-2] + E.right[-2]) \
+        if len(E.left) >= 2 else np.zeros(2)
+    t1 = 0.5 * (O.left[1] + O.right[1]) - 0.5 * (O.left[0] + O.right[0]) \
+        if len(O.left) >= 2 else np.zeros(2)
+    arc_shape = bool(cfg.connector_arc) and len(E.left) >= 2 and len(O.left) >= 2
+    t0, t1 = t0 / max(np.linalg.norm(t0), 1e-9), t1 / max(np.linalg.norm(t1), 1e-9)
+    return _connector_geometry(np.asarray(L0, float), np.asarray(R0, float),
+                               np.asarray(L1, float), np.asarray(R1, float), t0, t1,
+                               arc_shape, float(cfg.connector_spacing),
+                               int(cfg.connector_min_stations))
 
 
 def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
