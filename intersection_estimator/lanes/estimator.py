@@ -1,4 +1,11 @@
-"""Anytime lane-course estimator (paper §III) with the API of the topology step."""
+"""Anytime lane-course estimator (paper §III) with the API of the topology step.
+
+``initialise`` = preprocessing and initialisation (paper §III-A, ``lanes/init.py``,
+``lanes/stops.py``): split and assign trajectories, re-fit the straight lanes, complete
+one-sided trajectories, fit the stop lines, build the lanelet graph with shared border
+points (``lanes/model.py``) and evidenced connectors. ``run`` = the paper's MCMC
+(``lanes/mcmc.py``) plus the optional least-squares refinement (``lanes/refine.py``).
+"""
 
 from __future__ import annotations
 
@@ -7,10 +14,11 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..model import Intersection, Lanelet
+from ..model import ENTERING, LEAVING, Intersection, Lanelet
 from ..observations import Detections
 from .config import LaneConfig
-from .init import arm_frames, assign_parts, fit_frames, lane_specs, stop_distances, trajectories
+from .init import (arm_frames, assign_parts, connector_id, fit_frames, lane_id, lane_specs,
+                   stop_distances, trajectories)
 from .likelihood import all_terms, assign_points, station_csr
 from .mcmc import run_chain
 from .model import LaneGraph, build_graph
@@ -112,8 +120,27 @@ class LaneCourseEstimator:
 
     # ------------------------------------------------------------------ setup
     def initialise(self, topology: Intersection, dets: Detections | None) -> None:
-        cfg = self.config
+        """Lanelets from ``topology`` and the trajectories in ``dets`` (paper §III-A).
+
+        Keeps the chain (warm start) when the topology and the set of lanelets are
+        unchanged; then only the trajectory points are re-assigned."""
         t0 = time.perf_counter()
+        self._trajs, frames, self.stops = self._preprocess(topology, dets)
+        specs, pairs, _ = lane_specs(topology, self._trajs, self.config, stops=self.stops,
+                                     frames=frames)
+        key = (_topology_key(topology), tuple(s.id for s in specs))
+        if self.graph is not None and key == self._key:
+            self._setup_likelihood()
+        else:
+            self._key, self._k = key, 0
+            self.graph = build_graph(specs, pairs) if specs else None
+            if self.graph is not None:
+                self._setup_graph()
+        self.timings['initialise'] = time.perf_counter() - t0
+
+    def _preprocess(self, topology: Intersection, dets: Detections | None):
+        """Trajectories split and assigned, arm frames re-fitted, stop lines fitted."""
+        cfg = self.config
         trajs = trajectories(dets)
         stops = stop_distances(topology, cfg)
         assign_parts(trajs, topology, cfg, stops)
@@ -128,30 +155,20 @@ class LaneCourseEstimator:
             stops = fit_stops(topology, frames, trajs, stops, cfg.stop_search, cfg.stop_step,
                               float(stops.max(initial=0.0)) + 20.0, cfg.stop_clip,
                               cfg.stop_sweeps)
-        self.stops = stops
-        specs, pairs, _ = lane_specs(topology, trajs, cfg, stops=stops, frames=frames)
-        key = (_topology_key(topology), tuple(s.id for s in specs))
-        self._trajs = trajs
-        if self.graph is not None and key == self._key:
-            self._setup_likelihood()
-            self.timings['initialise'] = time.perf_counter() - t0
-            return
-        self._key = key
-        self._k = 0
-        self.graph = build_graph(specs, pairs) if specs else None
-        if self.graph is None:
-            self.timings['initialise'] = time.perf_counter() - t0
-            return
-        g = self.graph
+        return trajs, frames, stops
+
+    def _setup_graph(self) -> None:
+        """Optional LS refinement of the start, prior means, neighbour pairs, caches."""
+        g, cfg = self.graph, self.config
         self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
         if cfg.refine_init:
             self._setup_likelihood()
-        if cfg.refine_init and len(self._Q):
-            self._refine(assign=True)
-            for i, s in enumerate(g.specs):
-                if s.kind == 'connector':
-                    _respace(g, i)
-            self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
+            if len(self._Q):
+                self._refine(assign=True)
+                for i, s in enumerate(g.specs):
+                    if s.kind == 'connector':
+                        _respace(g, i)
+                self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
         C = g.centers()
         ang, self._mu = np.zeros(len(C)), np.zeros(len(g.specs))
         all_angles(C, g.prev_st, g.next_st, g.st_ll, ang, self._mu)
@@ -164,13 +181,10 @@ class LaneCourseEstimator:
             g.pair_b = np.concatenate([g.pair_b, [b for _, b in extra]]).astype(np.int64)
             g.pair_merged = np.concatenate([g.pair_merged, np.zeros(len(extra), np.bool_)])
         self._setup_likelihood()
-        self.timings['initialise'] = time.perf_counter() - t0
 
     def _sequences(self):
         """(points, lanelet indices) per trajectory: its entering, connector, leaving lanelet."""
         index = {s.id: i for i, s in enumerate(self.graph.specs)}
-        from .init import connector_id, lane_id
-        from ..model import ENTERING, LEAVING
         seqs = []
         for tr in self._trajs:
             e = index.get(lane_id(tr.lane_in[0], ENTERING, tr.lane_in[1])) if tr.lane_in else None
