@@ -58,6 +58,7 @@ _RANGES = {
     'temp_start': (1e-4, 1e4, 'annealing temperature at sample 0'),
     'temp_end': (1e-4, 1e4, 'annealing temperature after anneal_samples'),
     'anneal_samples': (1, 10**9, 'length of the geometric annealing schedule'),
+    'warm_tolerance': (0.0, 100.0, 'warm start only while the new initial course is this close [m]'),
     'keep_best': (0, 1, '1: end each run in the best state seen (MAP), 0: in the final state'),
     'refine': (0, 1, 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
     'refine_init': (0, 1, 'penalised least-squares refinement of the initialisation'),
@@ -123,6 +124,7 @@ class LaneConfig:
     temp_start: float = 0.05
     temp_end: float = 0.02
     anneal_samples: int = 20000
+    warm_tolerance: float = 0.3
     keep_best: int = 1
     refine: int = 0
     refine_init: int = 0

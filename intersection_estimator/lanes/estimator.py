@@ -123,13 +123,16 @@ class LaneCourseEstimator:
         """Lanelets from ``topology`` and the trajectories in ``dets`` (paper §III-A).
 
         Keeps the chain (warm start) when the topology and the set of lanelets are
-        unchanged; then only the trajectory points are re-assigned."""
+        unchanged and the new initial course lies within ``warm_tolerance`` of the
+        current one; then only the trajectory points are re-assigned. Otherwise the
+        new observations moved the initialisation (stop lines, lane fits) and the
+        lanelets are rebuilt from it."""
         t0 = time.perf_counter()
         self._trajs, frames, self.stops = self._preprocess(topology, dets)
         specs, pairs, _ = lane_specs(topology, self._trajs, self.config, stops=self.stops,
                                      frames=frames)
         key = (_topology_key(topology), tuple(s.id for s in specs))
-        if self.graph is not None and key == self._key:
+        if self.graph is not None and key == self._key and self._close_to(specs):
             self._setup_likelihood()
         else:
             self._key, self._k = key, 0
@@ -137,6 +140,14 @@ class LaneCourseEstimator:
             if self.graph is not None:
                 self._setup_graph()
         self.timings['initialise'] = time.perf_counter() - t0
+
+    def _close_to(self, specs) -> bool:
+        g = self.graph
+        if len(specs) != len(g.specs) or any(len(s.left) != n for s, n in zip(specs, g.st_n)):
+            return False
+        new = np.concatenate([0.5 * (s.left + s.right) for s in specs])
+        return float(np.max(np.linalg.norm(new - g.centers(), axis=1))) <= \
+            self.config.warm_tolerance
 
     def _preprocess(self, topology: Intersection, dets: Detections | None):
         """Trajectories split and assigned, arm frames re-fitted, stop lines fitted."""
