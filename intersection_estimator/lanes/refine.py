@@ -29,8 +29,8 @@ def nearest_in_window(C, Q, lo, hi):
     best = np.full(len(Q), np.inf)
     bg = lo.copy()
     bt = np.zeros(len(Q))
-    for k in range(3):
-        g = lo + k  # windows have two (formerly three) segments; extra k is masked
+    for k in range(int((hi - lo).max(initial=0))):
+        g = lo + k
         ok = g < hi
         gg = np.where(ok, g, lo)
         a, b = C[gg], C[np.minimum(gg + 1, len(C) - 1)]
