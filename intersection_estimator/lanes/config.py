@@ -128,11 +128,11 @@ class LaneConfig:
     keep_best: int = 1
     refine: int = 0
     refine_init: int = 0
-    refine_smooth: float = 20.0
-    refine_smooth_connector: float = 1.0
+    refine_smooth: float = 1e4
+    refine_smooth_connector: float = 300.0
     refine_keep_shape: int = 1
     refine_jerk: float = 0.0
-    refine_width: float = 1.0
+    refine_width: float = 100.0
     refine_iters: int = 4
     refine_huber: float = 2.0
 
