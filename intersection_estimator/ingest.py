@@ -38,7 +38,8 @@ PENDING_MAX = 256        # messages held back waiting for the ego pose
 JUMP_S = 30.0            # a stamp this far from the time base is suspicious
 JUMP_CONFIRM = 5         # ... and accepted as a new time base after this many consistent ones in a row
 MAX_COORD = 1e7          # |x|, |y| beyond this [m] is no place in a metric map frame (UTM northing < 1e7)
-MAX_EGO_SPEED = 100.0    # [m/s] odometry implying more than this is an ego jump (confirmed like a time jump)
+MAX_EGO_SPEED = 70.0     # [m/s] odometry implying more than this is an ego jump (confirmed like a time jump)
+EGO_DT_MAX = 0.5         # [s] ... over at most this much time: a stamp far ahead buys no distance
 EGO_SLACK = 2.0          # [m] position noise allowed on top of MAX_EGO_SPEED * dt
 
 
@@ -266,7 +267,7 @@ class Ingest:
 def _plausible(a: EgoPose, b: EgoPose) -> bool:
     """Can the ego get from pose ``a`` to pose ``b`` (not far back in time, not too fast)?"""
     dt = b.stamp - a.stamp
-    return dt >= -1.0 and math.hypot(b.x - a.x, b.y - a.y) <= MAX_EGO_SPEED * abs(dt) + EGO_SLACK
+    return dt >= -1.0 and math.hypot(b.x - a.x, b.y - a.y) <= MAX_EGO_SPEED * min(abs(dt), EGO_DT_MAX) + EGO_SLACK
 
 
 def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None):

@@ -16,8 +16,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_sensor_data)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType, SetParametersResult
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange
 
@@ -41,6 +40,11 @@ _ARRAY = {str: ParameterType.PARAMETER_STRING_ARRAY, float: ParameterType.PARAME
 _STARTUP_ONLY = frozenset({'radar_topics', 'radar_scan_topics', 'detection_topics', 'object_topics',
                            'autoware_object_topics', 'odometry_topic', 'fixed_frame', 'timer_period'})
 _STATE = {'NO_DATA': 0, 'CONVERGING': 1, 'CONVERGED': 2}
+#: inputs: best effort (matches reliable and best-effort publishers, as sensor data QoS), but
+#: a queue deep enough for bursts (several sensors at once, bag playback, a slow tick):
+#: sensor data QoS keeps 5 and drops the rest silently
+INPUT_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE)
 
 
 def _descriptor(spec: P.ParamSpec) -> ParameterDescriptor:
@@ -92,7 +96,7 @@ class IntersectionEstimatorNode(Node):
 
         inputs = MutuallyExclusiveCallbackGroup()
         for role, topic, msg_type in self.ingest.subscriptions():
-            self.create_subscription(msg_type, topic, self._callback(role), qos_profile_sensor_data,
+            self.create_subscription(msg_type, topic, self._callback(role), INPUT_QOS,
                                      callback_group=inputs)
             self.get_logger().info(f'listening to {topic} ({role})')
         self.timer = self.create_timer(self.values['timer_period'], self._tick,
