@@ -30,8 +30,8 @@ STATE_LEN = HDR + STRIDE * MAXA
  P_ROT, P_SHIFT, P_GAP_STEP, P_W_STEP, P_SPLIT_SPAN,
  P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE,
  P_FLOOR, P_TRAFFIC, P_D2_CUT, P_SAMPLE_W, P_W_DEFAULT,
- P_LANE_NORM, P_FINE_P, P_FINE_SCALE) = range(26)
-NPARAM = 26
+ P_LANE_NORM, P_FINE_P, P_FINE_SCALE, P_LANE_SUM) = range(27)
+NPARAM = 27
 
 ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH = range(7)
 MOVE_NAMES = ('rotate', 'shift', 'gap', 'add_arm', 'remove_arm', 'lane', 'width')
@@ -364,12 +364,14 @@ def log_prior(S, logPA, logPn, arm_const):
 
 # ----------------------------------------------------------------------------- likelihood
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """Unnormalised density of every observation under its best lane of arm ``k``.
 
     Paper eq. for P(z_i|I): closest lane with the same driving direction, Gaussian in the
-    orthogonal distance and (with orientation) in the angle, divided by (number of
+    orthogonal distance (or, with ``P_LANE_SUM``, the sum over the lanes of that direction:
+    the mixture of paper eq. for P(z_i|I)) and (with orientation) von Mises in the angle (``2(1 - cos)`` in
+    place of the squared angle: the circular normal, no ``acos``), divided by (number of
     lanes of that direction) ** ``P_LANE_NORM``. Lanes are rays from the
     center; behind the ray start the Euclidean distance to the start is used. With an
     orientation the direction is arm-local (entering iff <o, u_a> < 0).
@@ -388,6 +390,7 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     ts = P[P_TRAFFIC]
     inv_n_in = nin ** -P[P_LANE_NORM]
     inv_n_out = nout ** -P[P_LANE_NORM]
+    lane_sum = P[P_LANE_SUM] > 0.0
     for i in range(ox.shape[0]):
         px = ox[i] - cx
         py = oy[i] - cy
@@ -397,13 +400,12 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
         if has_o[i]:
             c = hx[i] * ux + hy[i] * uy
             d = 1.0 if c < 0.0 else -1.0
-            ca = abs(c)
-            if ca > 1.0:
-                ca = 1.0
-            ang = math.acos(ca)
-            e = isa[i] * ang * ang
+            e = isa[i] * 2.0 * (1.0 - abs(c))     # von Mises: 2(1 - cos) ~ angle^2
         else:
             d = dcls[i]
+        if e >= cut:
+            out[i] = 0.0
+            continue
         nl = nin if d > 0.0 else nout
         q = d * ts * t - hg
         kk = math.floor(q / w)
@@ -412,14 +414,24 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
         elif kk > nl - 1.0:
             kk = nl - 1.0
         dl = q - (kk + 0.5) * w
-        d2 = dl * dl
-        if s < 0.0:
-            d2 += s * s
-        e += isp[i] * d2
-        out[i] = math.exp(-e) * (inv_n_in if d > 0.0 else inv_n_out) if e < cut else 0.0
+        e0 = e + (isp[i] * s * s if s < 0.0 else 0.0)
+        e = e0 + isp[i] * dl * dl
+        if e >= cut:
+            out[i] = 0.0
+            continue
+        if lane_sum:
+            v = 0.0
+            for j in range(int(nl)):
+                dj = q - (j + 0.5) * w
+                ej = e0 + isp[i] * dj * dj
+                if ej < cut:
+                    v += math.exp(-ej)
+        else:
+            v = math.exp(-e)
+        out[i] = v * (inv_n_in if d > 0.0 else inv_n_out)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def all_columns(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C):
     for k in range(int(S[2])):
         arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C[k])
@@ -446,6 +458,61 @@ def full_loglik(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C):
 
 # ----------------------------------------------------------------------------- annealing
 
+@njit(cache=True, fastmath=True)
+def observation_maxima(C, n, wts, floor, M, AM, Lg):
+    """Per observation: best density over arms ``M``, its arm ``AM`` (-1: none) and the
+    log-likelihood term ``Lg = w log(M + floor)``; returns their sum."""
+    ll = 0.0
+    for i in range(wts.shape[0]):
+        m = 0.0
+        am = -1
+        for j in range(n):
+            if C[j, i] > m:
+                m = C[j, i]
+                am = j
+        M[i] = m
+        AM[i] = am
+        Lg[i] = wts[i] * math.log(m + floor)
+        ll += Lg[i]
+    return ll
+
+
+@njit(cache=True, fastmath=True)
+def rescore_arm(C, n, k, col, has_col, wts, floor, M, AM, Lg, idx, nM, nAM, nLg):
+    """Log-likelihood change when arm slot ``k`` gets column ``col`` (``has_col``) or is
+    removed (not ``has_col``). Only observations whose best arm could change are
+    re-scored: those whose best arm is ``k``, or that ``col`` explains better than their
+    current best. Changed rows go to ``idx[:count]`` with new values in ``nM, nAM, nLg``.
+    Returns (delta, count).
+    """
+    delta = 0.0
+    cnt = 0
+    for i in range(wts.shape[0]):
+        c = col[i] if has_col else 0.0
+        if AM[i] == k:
+            m = c
+            am = k if has_col and c > 0.0 else -1
+            for j in range(n):
+                if j != k and C[j, i] > m:
+                    m = C[j, i]
+                    am = j
+        elif c > M[i]:
+            m = c
+            am = k
+        else:
+            continue
+        if m == M[i] and am == AM[i]:
+            continue
+        lg = wts[i] * math.log(m + floor)
+        idx[cnt] = i
+        nM[cnt] = m
+        nAM[cnt] = am
+        nLg[cnt] = lg
+        delta += lg - Lg[i]
+        cnt += 1
+    return delta, cnt
+
+
 @njit(cache=True)
 def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
               ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats):
@@ -453,16 +520,28 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
 
     Mutates ``S`` (chain state), ``C`` (per-arm density columns of ``S``) and
     ``best_S``; ``temps[t]`` is the temperature of step ``t``. The likelihood is
-    incremental: moves touching one arm recompute only that arm's column, a center shift
-    recomputes all. ``stats[kind*2]`` counts proposals, ``stats[kind*2+1]`` acceptances.
-    Returns (ll, lp, best_lpost).
+    incremental: a move of one arm recomputes only that arm's column and re-scores only
+    the observations whose best arm could change (see :func:`rescore_arm`); a center
+    shift recomputes everything. ``stats[kind*2]`` counts proposals, ``stats[kind*2+1]``
+    acceptances. Returns (ll, lp, best_lpost); ``ll`` is re-summed exactly at the end.
     """
     np.random.seed(seed)
     S2 = np.empty_like(S)
     nobs = ox.shape[0]
+    floor = P[P_FLOOR]
     col = np.empty(nobs)
     C2 = np.empty_like(C)
-    floor = P[P_FLOOR]
+    M = np.empty(nobs)
+    AM = np.empty(nobs, np.int64)
+    Lg = np.empty(nobs)
+    M2 = np.empty(nobs)
+    AM2 = np.empty(nobs, np.int64)
+    Lg2 = np.empty(nobs)
+    idx = np.empty(nobs, np.int64)
+    nM = np.empty(nobs)
+    nAM = np.empty(nobs, np.int64)
+    nLg = np.empty(nobs)
+    ll = observation_maxima(C, int(S[2]), wts, floor, M, AM, Lg)
     for step in range(n_steps):
         ok, lq, kind, k = propose(S, S2, P, logqn, cumqn)
         stats[2 * kind] += 1
@@ -470,17 +549,17 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
             continue
         n2 = int(S2[2])
         n = int(S[2])
+        cnt = 0
         if kind == SHIFT:
             all_columns(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2)
-            ll2 = combine(C2, n2, -1, col, False, wts, floor)
+            ll2 = observation_maxima(C2, n2, wts, floor, M2, AM2, Lg2)
         elif kind == REMOVE_ARM:
-            ll2 = combine(C, n, k, col, False, wts, floor)
-        elif kind == ADD_ARM:
-            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
-            ll2 = combine(C, n, -1, col, True, wts, floor)
+            d, cnt = rescore_arm(C, n, k, col, False, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
+            ll2 = ll + d
         else:
             arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
-            ll2 = combine(C, n, k, col, True, wts, floor)
+            d, cnt = rescore_arm(C, n2, k, col, True, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
+            ll2 = ll + d
         lp2 = log_prior(S2, logPA, logPn, arm_const)
         a = (ll2 + lp2 - ll - lp) / temps[step] + lq
         if a < 0.0 and math.log(np.random.random()) >= a:
@@ -489,17 +568,32 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
         if kind == SHIFT:
             for j in range(n2):
                 C[j, :] = C2[j, :]
-        elif kind == REMOVE_ARM:
-            if k != n - 1:
-                C[k, :] = C[n - 1, :]
+            M[:] = M2
+            AM[:] = AM2
+            Lg[:] = Lg2
         else:
-            C[k, :] = col
+            for q in range(cnt):
+                i = idx[q]
+                M[i] = nM[q]
+                AM[i] = nAM[q]
+                Lg[i] = nLg[q]
+            if kind == REMOVE_ARM:
+                if k != n - 1:
+                    C[k, :] = C[n - 1, :]
+                    for i in range(nobs):
+                        if AM[i] == n - 1:
+                            AM[i] = k
+            else:
+                C[k, :] = col
         S[:] = S2
         ll = ll2
         lp = lp2
         if ll + lp > best_lpost:
             best_lpost = ll + lp
             best_S[:] = S
+    ll = 0.0
+    for i in range(nobs):
+        ll += Lg[i]
     return ll, lp, best_lpost
 
 
@@ -524,6 +618,7 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
     cut = P[P_D2_CUT]
     ts = P[P_TRAFFIC]
     beta = P[P_LANE_NORM]
+    lane_sum = P[P_LANE_SUM] > 0.0
     floor = P[P_FLOOR]
     lo = int(P[P_MIN_LANES])
     hi = int(P[P_MAX_LANES])
@@ -540,9 +635,7 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
         if has_o[i]:
             c = hx[i] * ux + hy[i] * uy
             d = 1.0 if c < 0.0 else -1.0
-            ca = min(abs(c), 1.0)
-            ang = math.acos(ca)
-            e = isa[i] * ang * ang
+            e = isa[i] * 2.0 * (1.0 - abs(c))     # von Mises: 2(1 - cos) ~ angle^2
         else:
             d = dcls[i]
         dd[i] = d
@@ -553,6 +646,14 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             if j != k and C[j, i] > m:
                 m = C[j, i]
         other[i] = m
+    # observations this arm can explain at all (others add a constant to every candidate)
+    reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX]
+    rel = np.empty(nobs, np.int64)
+    nrel = 0
+    for i in range(nobs):
+        if base[i] < cut and abs(tl[i]) < reach + math.sqrt(cut / isp[i]):
+            rel[nrel] = i
+            nrel += 1
     ng = gaps.shape[0] + 1
     nw = widths.shape[0] + 1
     best = -np.inf
@@ -574,7 +675,8 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                 for nl in range(lo, hi + 1):
                     inv = float(nl) ** -beta
                     ll = logPn[nl]
-                    for i in range(nobs):
+                    for r in range(nrel):
+                        i = rel[r]
                         if dd[i] != dsel:
                             continue
                         q = tl[i] - 0.5 * g
@@ -585,7 +687,18 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                             kk = nl - 1.0
                         dl = q - (kk + 0.5) * w
                         e = base[i] + isp[i] * dl * dl
-                        v = math.exp(-e) * inv if e < cut else 0.0
+                        if e >= cut:
+                            v = 0.0
+                        elif lane_sum:
+                            v = 0.0
+                            for jl in range(nl):
+                                dj = q - (jl + 0.5) * w
+                                ej = base[i] + isp[i] * dj * dj
+                                if ej < cut:
+                                    v += math.exp(-ej)
+                            v *= inv
+                        else:
+                            v = math.exp(-e) * inv
                         if other[i] > v:
                             v = other[i]
                         ll += wts[i] * math.log(v + floor)

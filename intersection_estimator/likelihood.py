@@ -5,8 +5,11 @@ direction is found and scored with ``N(d_perp; sigma_perp) * N(d_angle; sigma_an
 (the angle term only for observations with an orientation ``o``). Deviations from the
 paper's formula, each for a reason:
 
-* max over lanes instead of the sum: the sum rewards duplicate lanes; the paper's text
-  ("we determine the closest lane") is the max.
+* the angle term is von Mises, ``exp(-(1 - cos d_angle) / sigma^2)``, the circular normal
+  (equal to the normal for small angles, no ``acos`` in the inner loop).
+
+* max over lanes (the paper's text: "we determine the closest lane") or, optionally,
+  the paper's sum over lanes (eq. for P(z_i|I)); both with the lane normalisation below.
 * robust clutter floor: ``log(density + floor)`` -- a mixture with a uniform outlier
   density, so false detections and turning vehicles inside the intersection box cannot
   dominate. The density is unnormalised (peak 1) so ``floor`` reads as "an outlier is as
@@ -113,14 +116,19 @@ def log_likelihood_reference(S: np.ndarray, obs: ObservationSet, P: np.ndarray) 
         t = p @ nrm
         dot = obs.hx * u[0] + obs.hy * u[1]
         d = np.where(obs.has_o, np.where(dot < 0, 1.0, -1.0), obs.d)
-        ang_dev = np.where(obs.has_o, np.arccos(np.minimum(np.abs(dot), 1.0)), 0.0)
+        ang2 = np.where(obs.has_o, 2.0 * (1.0 - np.abs(dot)), 0.0)    # von Mises
         dens = np.zeros(len(obs))
         for direction, nl in ((1.0, int(nin)), (-1.0, int(nout))):
             offs = direction * P[K.P_TRAFFIC] * (0.5 * gap + (np.arange(nl) + 0.5) * w)
-            dl = np.min(np.abs(t[:, None] - offs[None, :]), axis=1)
-            d2 = dl ** 2 + np.where(s < 0, s ** 2, 0.0)
-            e = 0.5 * d2 / obs.sigma ** 2 + 0.5 * ang_dev ** 2 / obs.sigma_ang ** 2
-            val = np.where(e < P[K.P_D2_CUT], np.exp(-e), 0.0)
+            dls = np.abs(t[:, None] - offs[None, :])
+            ea = 0.5 * ang2 / obs.sigma_ang ** 2 + 0.5 * np.where(s < 0, s ** 2, 0.0) / obs.sigma ** 2
+            e_all = ea[:, None] + 0.5 * dls ** 2 / obs.sigma[:, None] ** 2
+            e = e_all.min(axis=1)
+            if P[K.P_LANE_SUM] > 0:
+                parts = np.where(e_all < P[K.P_D2_CUT], np.exp(-e_all), 0.0).sum(axis=1)
+                val = np.where(e < P[K.P_D2_CUT], parts, 0.0)
+            else:
+                val = np.where(e < P[K.P_D2_CUT], np.exp(-e), 0.0)
             val = val / float(nl) ** P[K.P_LANE_NORM]
             dens = np.where(d == direction, val, dens)
         best = np.maximum(best, dens)

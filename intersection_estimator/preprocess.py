@@ -42,8 +42,13 @@ class PreprocessConfig:
     sigma_angle_deg: float = 5.0        # heading of a trajectory part / detection
     pca_radius: float = 8.0             # [m] initial center: local PCA of radar voxels
     voxel_size: float = 2.0             # [m] raw / heading voxel edge
+    voxel_length: float = 10.0          # [m] radar voxels along an arm (0: square voxels)
+    voxel_width: float = 1.0            # [m] ... and across it
+    straight_run: bool = True           # drop radar voxels off straight lane runs
     heading_sectors: int = 8            # heading voxelisation: sectors of 360/n deg
-    weight_power: float = 1.0           # voxel weight = count ** power * weight_scale
+    passage_gap: float = 1.0            # [s] stamps further apart: another vehicle passage
+                                        # (0: weights in raw detection counts)
+    weight_power: float = 1.0           # voxel weight = passages ** power * weight_scale
     weight_scale: float = 1.0
     min_doppler: float = 0.5            # [m/s] |doppler| below: static -> dropped
     min_rcs: float = 0.0                # [dBsm] below: clutter -> dropped (NaN rcs kept)
@@ -66,8 +71,12 @@ def _direction_class(x, y, hx, hy, center):
     return np.where(hx * (center[0] - x) + hy * (center[1] - y) > 0, 1.0, -1.0)
 
 
-def voxelise(xy: np.ndarray, cls: np.ndarray, size: float, vec: np.ndarray | None = None):
-    """Merge points per (voxel, class): mean position, count (and summed vectors)."""
+def voxelise(xy: np.ndarray, cls: np.ndarray, size: float, vec: np.ndarray | None = None,
+             t: np.ndarray | None = None, gap: float = 1.0):
+    """Merge points per (voxel, class): mean position, count (and summed vectors).
+
+    With stamps ``t`` the counts are divided by the mean number of detections per vehicle
+    passage (see :func:`passages`), i.e. expressed in vehicles."""
     if len(xy) == 0:
         return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2))
     ij = np.floor(xy / size).astype(np.int64)
@@ -82,7 +91,23 @@ def voxelise(xy: np.ndarray, cls: np.ndarray, size: float, vec: np.ndarray | Non
     if vec is not None:
         sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
                        np.bincount(inv, vec[:, 1], len(uk))], axis=1)
+    if t is not None and gap > 0:   # counts in vehicle passages (global detections/passage)
+        per_pass = len(xy) / max(passages(inv, t, len(uk), gap).sum(), 1.0)
+        return np.stack([mx, my], axis=1), cls[first], cnt / per_pass, sv
     return np.stack([mx, my], axis=1), cls[first], cnt.astype(np.float64), sv
+
+
+def passages(inv: np.ndarray, t: np.ndarray, n: int, gap: float) -> np.ndarray:
+    """Per voxel: number of vehicle passages = clusters of its detection stamps separated
+    by more than ``gap`` seconds. Detections of one passing vehicle are not independent;
+    weights in units of passages give each vehicle (about) one vote per voxel whatever the
+    sensor rate or the number of points per vehicle."""
+    if len(inv) == 0:
+        return np.zeros(n)
+    o = np.lexsort((t, inv))
+    vi, ts = inv[o], t[o]
+    new = np.r_[True, (vi[1:] != vi[:-1]) | (np.diff(ts) > gap)]
+    return np.bincount(vi[new], minlength=n).astype(np.float64)
 
 
 def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
@@ -129,21 +154,40 @@ def radar_filter(dets: Detections, cfg: PreprocessConfig) -> np.ndarray:
     return m
 
 
-def radar_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
-    """Doppler -> driving direction relative to ``center``, then voxelise per class."""
+def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
+                       arm_angles=None) -> ObservationSet:
+    """Doppler -> driving direction relative to ``center``, then voxelise per class.
+
+    With ``arm_angles`` (the current arms) the voxels are aligned with the nearest arm:
+    ``voxel_length`` along it, ``voxel_width`` across, so a voxel never mixes lanes yet
+    covers a long piece of one; voxels without an occupied neighbour voxel in the same
+    lateral band on both sides along the arm are dropped -- they are not on a straight
+    lane (turning vehicles inside the box, isolated clutter). Otherwise square voxels.
+    """
     m = radar_filter(dets, cfg)
     if not m.any():
         return ObservationSet.empty()
     c = np.asarray(center, float)
-    xy, dop, sxy = dets.xy[m], dets.doppler[m], dets.sensor_xy[m]
+    xy, dop, sxy, ts = dets.xy[m], dets.doppler[m], dets.sensor_xy[m], dets.t[m]
     rx, ry, okr = _unit(xy[:, 0] - c[0], xy[:, 1] - c[1])
     has_s = np.isfinite(sxy).all(axis=1)
     lx, ly, okl = _unit(xy[:, 0] - np.where(has_s, sxy[:, 0], c[0]),
                         xy[:, 1] - np.where(has_s, sxy[:, 1], c[1]))
+    arm_mode = arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0
+    if arm_mode:   # the lane direction is the arm's, not the radial direction
+        arm, s_arm, t_arm = _assign_arms(xy, c, np.asarray(arm_angles, float))
+        rx, ry = np.cos(np.asarray(arm_angles))[arm], np.sin(np.asarray(arm_angles))[arm]
+        okr = okr & (s_arm > 0)
     proj = rx * lx + ry * ly
     keep = okr & okl & (np.abs(proj) >= cfg.min_radial_cos)
     d = np.where(dop * proj > 0, -1.0, 1.0)[keep]
-    vxy, vcls, cnt, _ = voxelise(xy[keep], (d > 0).astype(np.int64), cfg.voxel_size)
+    cls = (d > 0).astype(np.int64)
+    if arm_mode:
+        vxy, vcls, cnt = _arm_voxels(xy[keep], cls, arm[keep], s_arm[keep], t_arm[keep],
+                                     ts[keep], cfg)
+    else:
+        vxy, vcls, cnt, _ = voxelise(xy[keep], cls, cfg.voxel_size, t=ts[keep],
+                                     gap=cfg.passage_gap)
     dcls = np.where(vcls > 0, 1.0, -1.0)
     n = len(vxy)
     z = np.zeros(n)
@@ -153,20 +197,77 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obser
     return _drop_near_center(obs, c, cfg)
 
 
-def heading_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
-    """Lidar/camera rows (heading, no id, no Doppler): voxelise per heading sector."""
+def _assign_arms(xy, c, angles):
+    """Nearest arm (smallest lateral offset among arms the point lies ahead of), s, t."""
+    v = xy - c
+    u = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    s = v @ u.T
+    t = v @ np.stack([-u[:, 1], u[:, 0]], axis=1).T
+    arm = np.argmin(np.where(s > 0, np.abs(t), np.inf), axis=1)
+    r = np.arange(len(v))
+    return arm, s[r, arm], t[r, arm]
+
+
+def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
+    """Arm-aligned voxels with the straight-run filter (see :func:`radar_observations`).
+
+    Returns mean position, class, weight in vehicle passages (and summed ``vec``)."""
+    si = np.floor(s / cfg.voxel_length).astype(np.int64)
+    ti = np.floor(t / cfg.voxel_width).astype(np.int64)
+    key = ((arm * 1024 + si + 512) * 4096 + ti + 2048) * 2 + cls
+    uk, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    p = xy
+    mean = np.stack([np.bincount(inv, p[:, 0], len(uk)), np.bincount(inv, p[:, 1], len(uk))],
+                    axis=1) / cnt[:, None]
+    occupied = set(uk.tolist())
+    if cfg.straight_run:
+        step = 4096 * 2
+        keepv = np.array([any(k - step + dt * 2 in occupied for dt in (-1, 0, 1))
+                          and any(k + step + dt * 2 in occupied for dt in (-1, 0, 1))
+                          for k in uk.tolist()], dtype=bool)
+    else:
+        keepv = np.ones(len(uk), bool)
+    # detections per vehicle passage of an along-arm bin (all lateral bins together)
+    band = (arm * 1024 + si + 512) * 2 + cls
+    ub, binv = np.unique(band, return_inverse=True)
+    n_pass = passages(binv.reshape(-1), stamp, len(ub), cfg.passage_gap).sum()
+    per_pass = len(xy) / max(n_pass, 1.0) if cfg.passage_gap > 0 else 1.0
+    if vec is not None:
+        sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
+                       np.bincount(inv, vec[:, 1], len(uk))], axis=1)
+        return mean[keepv], (uk % 2)[keepv], cnt[keepv] / per_pass, sv[keepv]
+    return mean[keepv], (uk % 2)[keepv], cnt[keepv] / per_pass
+
+
+def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
+                         arm_angles=None) -> ObservationSet:
+    """Lidar/camera rows (heading, no id, no Doppler) -> voxels with their mean heading.
+
+    With ``arm_angles``: arm-aligned voxels per direction class (entering iff the heading
+    points against the arm) and the straight-run filter, like radar; otherwise square
+    voxels per heading sector.
+    """
     m = (dets.track_id < 0) & np.isfinite(dets.heading) & ~np.isfinite(dets.doppler)
     if not m.any():
         return ObservationSet.empty()
-    xy, h = dets.xy[m], dets.heading[m]
-    sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
-    vec = np.stack([np.cos(h), np.sin(h)], axis=1)
-    vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
-                               cfg.voxel_size, vec)
-    hx, hy, ok = _unit(sv[:, 0], sv[:, 1])
     c = np.asarray(center, float)
+    xy, h, ts = dets.xy[m], dets.heading[m], dets.t[m]
+    vec = np.stack([np.cos(h), np.sin(h)], axis=1)
+    if arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0:
+        ang = np.asarray(arm_angles, float)
+        arm, s_arm, t_arm = _assign_arms(xy, c, ang)
+        ok = s_arm > 0
+        cls = (vec[:, 0] * np.cos(ang)[arm] + vec[:, 1] * np.sin(ang)[arm] < 0).astype(np.int64)
+        vxy, _, cnt, sv = _arm_voxels(xy[ok], cls[ok], arm[ok], s_arm[ok], t_arm[ok], ts[ok],
+                                      cfg, vec[ok])
+    else:
+        sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
+        vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
+                                   cfg.voxel_size, vec, t=ts, gap=cfg.passage_gap)
+    hx, hy, okh = _unit(sv[:, 0], sv[:, 1])
     d = _direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
-    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, ok, d,
+    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, okh, d,
                          cfg.weight_scale * cnt ** cfg.weight_power,
                          np.full(len(vxy), cfg.sigma_point),
                          np.full(len(vxy), math.radians(cfg.sigma_angle_deg)))
@@ -179,12 +280,12 @@ def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig) -> Observat
     return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist)
 
 
-def preprocess(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
+def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None) -> ObservationSet:
     """All observation kinds of ``dets`` for the current ``center`` (paper §II-A)."""
     dets = dets.finite()
     return ObservationSet.concat([tracked_observations(dets, center, cfg),
-                                  radar_observations(dets, center, cfg),
-                                  heading_observations(dets, center, cfg)])
+                                  radar_observations(dets, center, cfg, arm_angles),
+                                  heading_observations(dets, center, cfg, arm_angles)])
 
 
 # ----------------------------------------------------------------------------- initialisation

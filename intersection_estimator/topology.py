@@ -73,12 +73,17 @@ class TopologyConfig:
     pca_radius: float = 8.0              # [m] initial center: local PCA of radar voxels
     clutter_floor: float = 0.01          # uniform outlier level relative to the peak density
     cut_sigma2: float = 30.0             # densities below exp(-cut) are 0 (speed)
+    lane_sum: bool = False               # sum over lanes (paper eq.) instead of the closest
     lane_norm: float = 0.5               # density / (lanes of that arm and direction)**this
     # --- preprocessing (paper §II-A) ------------------------------------------------
-    voxel_size: float = 2.0              # [m]
+    voxel_size: float = 3.0              # [m] square voxels (heading rows; radar before arms)
+    voxel_length: float = 10.0           # [m] radar voxels aligned with the nearest arm
+    voxel_width: float = 1.0             # [m]
+    straight_run: bool = True            # drop radar voxels off straight lane runs
     heading_sectors: int = 8
-    weight_power: float = 0.5
-    weight_scale: float = 0.05
+    passage_gap: float = 1.0             # [s] voxel weight counts vehicle passages, not hits
+    weight_power: float = 1.0
+    weight_scale: float = 0.3
     min_doppler: float = 0.5             # [m/s]
     min_rcs: float = 0.0                 # [dBsm]
     min_radial_cos: float = 0.25
@@ -92,7 +97,7 @@ class TopologyConfig:
     t_start: float = 1.0
     t_end: float = 0.5
     anneal_samples: int = 5000
-    refit_sweeps: int = 2                # init: per-arm lane/gap/width coordinate ascent
+    refit_sweeps: int = 1                # init: per-arm lane/gap/width coordinate ascent
     polish_samples: int = 1000           # first samples of a new chain: continuous moves only
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule
     chunk: int = 500                     # samples per compiled call (anytime granularity)
@@ -143,7 +148,10 @@ class TopologyConfig:
         need('lane_norm', 0 <= self.lane_norm <= 2, '[0, 2]')
         need('cut_sigma2', 1 <= self.cut_sigma2 <= 700, '[1, 700]')
         need('voxel_size', 0.05 <= self.voxel_size <= 50, '[0.05, 50] m')
+        need('voxel_length', 0 <= self.voxel_length <= 100, '[0, 100] m')
+        need('voxel_width', 0.05 <= self.voxel_width <= 20, '[0.05, 20] m')
         need('heading_sectors', 1 <= self.heading_sectors <= 64, '[1, 64]')
+        need('passage_gap', 0 <= self.passage_gap <= 60, '[0, 60] s')
         need('weight_power', 0 <= self.weight_power <= 2, '[0, 2]')
         need('weight_scale', 0 < self.weight_scale <= 100, '(0, 100]')
         need('min_doppler', 0 <= self.min_doppler <= 50, '[0, 50] m/s')
@@ -196,6 +204,7 @@ class TopologyConfig:
         P[K.P_SAMPLE_W] = 1.0 if self.p_width > 0 else 0.0
         P[K.P_W_DEFAULT] = self.lane_width
         P[K.P_LANE_NORM] = self.lane_norm
+        P[K.P_LANE_SUM] = 1.0 if self.lane_sum else 0.0
         P[K.P_FINE_P] = self.fine_step_prob
         P[K.P_FINE_SCALE] = self.fine_step_scale
         return P
@@ -331,7 +340,7 @@ class TopologyEstimator:
             return
         angles = initial_arm_angles(p, o, w, c, math.radians(cfg.min_sep_deg), cfg.max_arms)
         angles = self._complete_arms(angles, o, w)
-        obs = preprocess(self._dets, c, self._pcfg)
+        obs = preprocess(self._dets, c, self._pcfg, angles)
         c, guess = initial_lanes(obs, c, angles, cfg.lane_width, cfg.max_lanes, cfg.gap_max,
                                  cfg.traffic_side, width_range=(cfg.lane_width_min,
                                                                 cfg.lane_width_max)
@@ -353,8 +362,8 @@ class TopologyEstimator:
         c, cfg = self._chain, self.cfg
         if len(self._obs) == 0 or cfg.refit_sweeps == 0:
             return
-        gaps = np.linspace(0.0, cfg.gap_max, int(round(cfg.gap_max / 0.25)) + 1)
-        widths = (np.linspace(cfg.lane_width_min, cfg.lane_width_max, 11) if cfg.sample_width
+        gaps = np.linspace(0.0, cfg.gap_max, int(round(cfg.gap_max / 0.5)) + 1)
+        widths = (np.linspace(cfg.lane_width_min, cfg.lane_width_max, 6) if cfg.sample_width
                   else np.zeros(0))
         for _ in range(cfg.refit_sweeps):
             for k in range(int(c.S[2])):
@@ -390,7 +399,9 @@ class TopologyEstimator:
         return angles
 
     def _preprocess(self, center) -> None:
-        self._obs = preprocess(self._dets, center, self._pcfg)
+        S = self._chain.best_S
+        angles = S[K.HDR:K.HDR + int(S[2]) * K.STRIDE:K.STRIDE].copy()
+        self._obs = preprocess(self._dets, center, self._pcfg, angles)
         self._pp_center = np.asarray(center, float).copy()
         self.preprocess_count += 1
         c = self._chain

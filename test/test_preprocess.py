@@ -106,7 +106,7 @@ def test_heading_detections_are_voxelised_with_their_heading():
                                PreprocessConfig(voxel_size=2.0))
     assert len(obs) == 2
     k = int(np.argmax(obs.x))
-    assert obs.w[k] == 3.0 and abs(math.atan2(obs.hy[k], obs.hx[k]) - 2.9) < 1e-3
+    assert obs.w[k] == 3.0 * obs.w[1 - k] and abs(math.atan2(obs.hy[k], obs.hx[k]) - 2.9) < 1e-3
     assert obs.d[k] == 1.0 and obs.d[1 - k] == -1.0   # toward / away from the center
 
 
