@@ -118,11 +118,13 @@ class Fuzzer:
         return msg
 
     def huge_cloud(self, t: float, n: int = 1_000_000):
-        """A real 10^6-point cloud (20 MB): refused as too large, never processed."""
-        from msg_adapters.pointcloud2 import radar_cloud_msg
+        """A real 10^6-point cloud (x, y float32: 8 MB): refused as too large, never processed."""
         self._count('cloud_1e6_points')
-        xyz = self.rng.normal(0.0, 30.0, (n, 3))
-        return radar_cloud_msg(self.types, self.header(t, 'radar'), xyz, np.zeros(n))
+        PointField = self.types.get('sensor_msgs/msg/PointField')
+        return self.types.get('sensor_msgs/msg/PointCloud2')(
+            header=self.header(t, 'radar', p_near=1.0), height=1, width=n, point_step=8, row_step=8 * n,
+            fields=[PointField(name=a, offset=4 * i, datatype=7, count=1) for i, a in enumerate('xy')],
+            data=self.rng.normal(0.0, 30.0, 2 * n).astype('<f4').view(np.uint8), is_dense=True)
 
     # -- intersection_estimator_msgs/TrackedObjectArray ---------------------------------------------
     def objects(self, base):
@@ -194,6 +196,211 @@ class Fuzzer:
             q = msg.pose.pose.orientation
             q.x = q.y = q.z = q.w = self._pick((0.0, np.nan, 1e300))
         return msg
+
+
+# -- over DDS -----------------------------------------------------------------------------------------
+N_FUZZ = 10_000           # fuzzed messages the node must have *received* (counted via /diagnostics)
+IN_FLIGHT = 120           # sent, not yet counted by the node: inside its input queues (100 per topic)
+LOG_PERIOD_S = 5.0        # the node's RateLimitedLog period
+
+
+class Probe:
+    """A test node: publishers on the node's inputs, subscribers on its outputs and /diagnostics."""
+
+    def __init__(self, ctx):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from intersection_estimator_msgs.msg import TrackedObjectArray, Topology
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import PointCloud2
+        self.node = rclpy.create_node('ie_reliability_probe', context=ctx)
+        deep = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub = {RADAR: self.node.create_publisher(PointCloud2, RADAR, deep),
+                    OBJECTS: self.node.create_publisher(TrackedObjectArray, OBJECTS, deep),
+                    ODOM: self.node.create_publisher(Odometry, ODOM, deep)}
+        self.topologies, self.diag = [], {}
+        self.node.create_subscription(Topology, NODE + '/topology', self.topologies.append, deep)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, deep)
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.node)
+
+    def _on_diag(self, msg):
+        for st in msg.status:
+            if st.hardware_id == 'intersection_estimator':
+                self.diag = {kv.key: kv.value for kv in st.values}
+
+    def spin(self, t: float = 0.0) -> None:
+        self.executor.spin_once(timeout_sec=t)
+
+    def count(self, prefix: str) -> int:
+        return sum(int(v) for k, v in self.diag.items() if k.startswith(prefix))
+
+    def matched(self) -> bool:
+        return (all(p.get_subscription_count() > 0 for p in self.pub.values())
+                and self.node.count_publishers('/diagnostics') > 0)
+
+    def destroy(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def probe(ros_context):
+    p = Probe(ros_context)
+    yield p
+    p.destroy()
+
+
+def _start_node(node_process, *params):
+    # ticks of 40 ms every 100 ms: diagnostics at 10 Hz and CPU left for the inputs
+    args = [script('intersection_estimator_node'), '--ros-args', '-p', 'timer_period:=0.1',
+            '-p', 'budget_ms:=40.0']
+    for p in params:
+        args += ['-p', p]
+    return node_process(args)
+
+
+_PHRASES = {'beyond': 'out_of_range', 'occurs twice': 'duplicate_id', 'ego pose jumped': 'ego_relocalised',
+            'time base moved': 'time_base_reset', 'tick failed': 'tick_error'}
+
+
+def _warnings_per_reason(log: str) -> dict[str, int]:
+    """Warning lines of the node's log grouped by reason (the adapters' key, else the text)."""
+    out: dict[str, int] = {}
+    for line in log.splitlines():
+        if '[WARN]' not in line:
+            continue
+        text = line.split(']: ', 1)[-1]
+        m = re.search(r'dropped a (?:held-back )?message: (\w+):', text)
+        key = m.group(1) if m else next((k for phrase, k in _PHRASES.items() if phrase in text), text[:40])
+        out[key] = out.get(key, 0) + 1
+    return out
+
+
+@pytest.mark.dds
+def test_node_survives_10000_fuzzed_messages_and_still_estimates(probe, node_process):
+    from intersection_estimator.bagio import scenario_messages
+    from intersection_estimator.sim import simulate_scenario
+    from msg_adapters.types import RclpyTypes
+    types = RclpyTypes()
+    scenario = simulate_scenario(SEED)
+    valid = [(t, topic, m) for t, topic, m in
+             scenario_messages(scenario, types, sensors=('tracked',), autoware=False) if topic in probe.pub]
+    proc = _start_node(node_process)
+    assert wait_for(probe.matched, 30, probe.spin), proc.output()
+    t_start = time.monotonic()
+    fuzz = Fuzzer(types, seed=8, t_base=valid[0][0])
+
+    # a real 10^6-point cloud (20 MB) first: refused as too large, logged with its size
+    huge = fuzz.huge_cloud(valid[0][0])
+    for _ in range(8):                     # best effort: an 8 MB sample may be lost in DDS, resend
+        probe.pub[RADAR].publish(huge)
+        if wait_for(lambda: probe.count('dropped_too_large') > 0, 2.5, probe.spin):
+            break
+    assert probe.count('dropped_too_large') > 0, proc.output()
+    assert '1000000 points > max_points' in proc.output()
+
+    print(f'huge cloud done at {time.monotonic() - t_start:.1f} s')
+    # the valid stream, each message followed by a burst of fuzzed ones
+    per_valid = 2 * (int(1.06 * N_FUZZ) // len(valid))
+    sent, ego, objects = 0, (0.0, 0.0, 0.0), None
+    topologies_during = len(probe.topologies)
+    for t, topic, msg in valid:
+        # flow control on the node's own count: best-effort inputs drop what overflows a queue
+        wait_for(lambda: sent - probe.count('received_') < IN_FLIGHT, 10, probe.spin, step=0.02)
+        probe.pub[topic].publish(msg)
+        sent += 1
+        if topic == ODOM:
+            p = msg.pose.pose
+            ego = (p.position.x, p.position.y, 2.0 * math.atan2(p.orientation.z, p.orientation.w))
+        else:
+            objects = msg
+        for _ in range(int(fuzz.rng.integers(0, per_valid + 1))):
+            r = fuzz.rng.random()
+            if r < 0.4:
+                probe.pub[RADAR].publish(fuzz.cloud(t))
+            elif r < 0.8 and objects is not None:
+                probe.pub[OBJECTS].publish(fuzz.objects(objects))
+            else:
+                probe.pub[ODOM].publish(fuzz.odometry(t, ego))
+            sent += 1
+        probe.spin()
+    print(f'published at {time.monotonic() - t_start:.1f} s')
+    # the node drains its queues: received counts stop growing
+    last = [-1]
+
+    def settled():
+        n, last[0] = probe.count('received_'), probe.count('received_')
+        return n == last[0] and n > 0 and probe.diag.get('state') != 'NO_DATA'
+    wait_for(lambda: settled() and settled(), 20, lambda _: [probe.spin(0.3)])
+    received = probe.count('received_')
+    fuzz_received = received - len(valid) - fuzz.kinds['cloud_1e6_points']   # a lower bound
+    assert fuzz_received >= N_FUZZ, (sent, received, probe.diag)
+    assert len(probe.topologies) > topologies_during, 'the node stopped publishing'
+
+    print(f'drained at {time.monotonic() - t_start:.1f} s')
+    # still estimating: the right number of arms for the simulated scenario
+    n_arms = len(scenario.gt.arms)
+    assert wait_for(lambda: probe.topologies and len(probe.topologies[-1].arms) == n_arms, 30, probe.spin), \
+        (len(probe.topologies[-1].arms), probe.diag, [ln for ln in proc.output().splitlines() if 'INFO' in ln])
+    assert proc.alive(), proc.output()[-3000:]
+
+    # every drop reason counted, the ones the fuzz must produce among them
+    dropped = {k[8:]: int(v) for k, v in probe.diag.items() if k.startswith('dropped_')}
+    for reason in ('truncated', 'bad_layout', 'missing_field', 'unknown_datatype', 'field_overflow',
+                   'too_large', 'non_finite', 'unknown_frame', 'stamp_jump', 'frame_mismatch',
+                   'out_of_range', 'duplicate_id', 'ego_jump'):
+        assert dropped.get(reason, 0) > 0, (reason, dropped)
+    assert 'internal_error' not in dropped and 'tick_error' not in dropped, (dropped, proc.output()[-3000:])
+
+    # rate limiting: at most one warning per reason and period
+    elapsed = time.monotonic() - t_start
+    per_reason = _warnings_per_reason(proc.output())
+    bound = int(elapsed / LOG_PERIOD_S) + 2
+    assert per_reason and max(per_reason.values()) <= bound, (bound, per_reason)
+    assert sum(per_reason.values()) < 0.02 * sum(dropped.values()), per_reason
+    print(f'fuzz: sent {sent} ({len(valid)} valid), node received {received}, '
+          f'dropped {dropped}, warnings {per_reason}, {elapsed:.0f} s, kinds {fuzz.kinds}')
+
+
+@pytest.mark.dds
+def test_bad_parameters_at_run_time_are_refused_and_the_old_value_kept(probe, node_process):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    proc = _start_node(node_process, 'lane_share:=0.5')
+    client = AsyncParameterClient(probe.node, NODE)
+    assert wait_for(lambda: client.services_are_ready(), 30, probe.spin), proc.output()
+
+    def call(future):
+        assert wait_for(future.done, 10, probe.spin), 'no answer from the parameter service'
+        return future.result()
+
+    bad = [('budget_ms', -5.0, 'budget_ms'), ('lane_share', 0.99, 'lane_share'), ('lane_share', math.nan, 'lane_share'),
+           ('window_s', 1e9, 'window_s'), ('topology_samples', 0, 'topology_samples'),
+           ('max_observations', 10, 'max_observations'), ('doppler_sign', 3, 'doppler_sign'),
+           ('reset_distance', math.inf, 'reset_distance'), ('seed', -1, 'seed'),
+           ('mount_x', [1.0, 2.0], 'mount_x'), ('timer_period', 0.5, 'timer_period')]
+    for name, value, named in bad:
+        results = call(client.set_parameters([Parameter(name, value=value)])).results
+        assert len(results) == 1 and not results[0].successful, (name, value)
+        reason = results[0].reason
+        # the name and what is allowed: rclpy's descriptor check ('out of range Min: .., Max: ..')
+        # or the node's own ('must be in [..]', 'must be one of ..', 'read-only at run time')
+        assert named in reason and any(w in reason for w in ('Min:', 'must be', 'read-only')), reason
+    # a wrongly typed value is refused by rclpy itself (the descriptor's type)
+    results = call(client.set_parameters([Parameter('budget_ms', value='fast')])).results
+    assert not results[0].successful and results[0].reason
+    # the running node keeps its old values ...
+    values = call(client.get_parameters(['budget_ms', 'lane_share', 'window_s', 'seed'])).values
+    assert [v.double_value for v in values[:3]] == [40.0, 0.5, 120.0] and values[3].integer_value == 0
+    # ... a good value still applies, and the node keeps publishing
+    assert call(client.set_parameters([Parameter('lane_share', value=0.4)])).results[0].successful
+    assert call(client.get_parameters(['lane_share'])).values[0].double_value == 0.4
+    n = len(probe.topologies)
+    assert wait_for(lambda: len(probe.topologies) > n + 2, 10, probe.spin), proc.output()
+    assert proc.alive(), proc.output()
 
 
 # -- the ingest guards the fuzz found missing (in-process, fast) ------------------------------------
