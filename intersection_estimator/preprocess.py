@@ -45,6 +45,7 @@ class PreprocessConfig:
     voxel_length: float = 10.0          # [m] radar voxels along an arm (0: square voxels)
     voxel_width: float = 1.0            # [m] ... and across it
     straight_run: bool = True           # drop radar voxels off straight lane runs
+    voxel_merge: int = 2                # then merge this many along-arm voxels
     heading_sectors: int = 8            # heading voxelisation: sectors of 360/n deg
     passage_gap: float = 1.0            # [s] stamps further apart: another vehicle passage
                                         # (0: weights in raw detection counts)
@@ -55,6 +56,7 @@ class PreprocessConfig:
     min_radial_cos: float = 0.25        # |<r, los>| below: direction ambiguous -> dropped
     min_part_points: int = 3            # trajectory parts with fewer points are dropped
     min_part_length: float = 5.0        # [m] ... or shorter extent (static false tracks)
+    min_track_speed: float = 3.0        # [m/s] tracks never faster than this are static
     trim_turn_deg: float = 15.0         # keep a part's straight run (0: whole part, paper)
     min_center_dist: float = 0.0        # [m] observations closer to the center dropped
 
@@ -116,10 +118,17 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     if not sel.any():
         return ObservationSet.empty()
     tid, t, xy, hd = dets.track_id[sel], dets.t[sel], dets.xy[sel], dets.heading[sel]
+    sp = dets.speed[sel]
     order = np.lexsort((t, tid))
-    tid, xy, hd = tid[order], xy[order], hd[order]
+    tid, xy, hd, sp = tid[order], xy[order], hd[order], sp[order]
     starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
     ends = np.r_[starts[1:], len(tid)]
+    if cfg.min_track_speed > 0 and np.isfinite(sp).any():   # static (false) tracks
+        vmax = np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), starts)
+        moving = vmax >= cfg.min_track_speed
+        starts, ends = starts[moving], ends[moving]
+        if len(starts) == 0:
+            return ObservationSet.empty()
     c = np.asarray(center, float)
     if not np.isfinite(hd).all():      # rows without heading: direction from positions
         for a, b in zip(starts, ends):
@@ -220,12 +229,14 @@ def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
     p = xy
     mean = np.stack([np.bincount(inv, p[:, 0], len(uk)), np.bincount(inv, p[:, 1], len(uk))],
                     axis=1) / cnt[:, None]
-    occupied = set(uk.tolist())
-    if cfg.straight_run:
+    if cfg.straight_run:   # occupied neighbour (lateral band +-1) before and after
         step = 4096 * 2
-        keepv = np.array([any(k - step + dt * 2 in occupied for dt in (-1, 0, 1))
-                          and any(k + step + dt * 2 in occupied for dt in (-1, 0, 1))
-                          for k in uk.tolist()], dtype=bool)
+        before = np.zeros(len(uk), bool)
+        after = np.zeros(len(uk), bool)
+        for dt in (-2, 0, 2):
+            before |= np.isin(uk - step + dt, uk, assume_unique=True)
+            after |= np.isin(uk + step + dt, uk, assume_unique=True)
+        keepv = before & after
     else:
         keepv = np.ones(len(uk), bool)
     # detections per vehicle passage of an along-arm bin (all lateral bins together)
@@ -233,11 +244,27 @@ def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
     ub, binv = np.unique(band, return_inverse=True)
     n_pass = passages(binv.reshape(-1), stamp, len(ub), cfg.passage_gap).sum()
     per_pass = len(xy) / max(n_pass, 1.0) if cfg.passage_gap > 0 else 1.0
+    sv = np.zeros((len(uk), 2))
     if vec is not None:
         sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
                        np.bincount(inv, vec[:, 1], len(uk))], axis=1)
-        return mean[keepv], (uk % 2)[keepv], cnt[keepv] / per_pass, sv[keepv]
-    return mean[keepv], (uk % 2)[keepv], cnt[keepv] / per_pass
+    uk, mean, cnt, sv = uk[keepv], mean[keepv], cnt[keepv].astype(np.float64), sv[keepv]
+    if cfg.voxel_merge > 1:   # fewer, longer voxels for the sampler (filter ran at full res.)
+        si_k = (uk // (4096 * 2)) % 1024
+        arm_k = uk // (4096 * 2 * 1024)
+        rest = uk % (4096 * 2)
+        key2 = (arm_k * 1024 + si_k // cfg.voxel_merge) * (4096 * 2) + rest
+        u2, inv2 = np.unique(key2, return_inverse=True)
+        inv2 = inv2.reshape(-1)
+        c2 = np.bincount(inv2, cnt, len(u2))
+        mean = np.stack([np.bincount(inv2, cnt * mean[:, 0], len(u2)),
+                         np.bincount(inv2, cnt * mean[:, 1], len(u2))], axis=1) / c2[:, None]
+        sv = np.stack([np.bincount(inv2, sv[:, 0], len(u2)), np.bincount(inv2, sv[:, 1], len(u2))],
+                      axis=1)
+        uk, cnt = u2, c2
+    if vec is not None:
+        return mean, uk % 2, cnt / per_pass, sv
+    return mean, uk % 2, cnt / per_pass
 
 
 def heading_observations(dets: Detections, center, cfg: PreprocessConfig,

@@ -80,6 +80,7 @@ class TopologyConfig:
     voxel_length: float = 10.0           # [m] radar voxels aligned with the nearest arm
     voxel_width: float = 1.0             # [m]
     straight_run: bool = True            # drop radar voxels off straight lane runs
+    voxel_merge: int = 2                 # ... then merge this many along-arm voxels
     heading_sectors: int = 8
     passage_gap: float = 1.0             # [s] voxel weight counts vehicle passages, not hits
     weight_power: float = 1.0
@@ -89,6 +90,7 @@ class TopologyConfig:
     min_radial_cos: float = 0.25
     min_part_points: int = 3
     min_part_length: float = 5.0         # [m]
+    min_track_speed: float = 3.0         # [m/s] max speed below: static (false) track
     trim_turn_deg: float = 15.0          # straight run of a trajectory part (0: paper)
     min_center_dist: float = 0.0         # [m]
     recenter_threshold: float = 2.0      # [m] re-preprocess when the center moved more
@@ -97,6 +99,7 @@ class TopologyConfig:
     t_start: float = 1.0
     t_end: float = 0.5
     anneal_samples: int = 5000
+    init_peak_frac: float = 0.12         # init: direction-histogram peaks above this share
     refit_sweeps: int = 1                # init: per-arm lane/gap/width coordinate ascent
     polish_samples: int = 1000           # first samples of a new chain: continuous moves only
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule
@@ -150,6 +153,7 @@ class TopologyConfig:
         need('voxel_size', 0.05 <= self.voxel_size <= 50, '[0.05, 50] m')
         need('voxel_length', 0 <= self.voxel_length <= 100, '[0, 100] m')
         need('voxel_width', 0.05 <= self.voxel_width <= 20, '[0.05, 20] m')
+        need('voxel_merge', 1 <= self.voxel_merge <= 20, '[1, 20]')
         need('heading_sectors', 1 <= self.heading_sectors <= 64, '[1, 64]')
         need('passage_gap', 0 <= self.passage_gap <= 60, '[0, 60] s')
         need('weight_power', 0 <= self.weight_power <= 2, '[0, 2]')
@@ -157,6 +161,7 @@ class TopologyConfig:
         need('min_doppler', 0 <= self.min_doppler <= 50, '[0, 50] m/s')
         need('min_radial_cos', 0 <= self.min_radial_cos < 1, '[0, 1)')
         need('min_part_points', 1 <= self.min_part_points <= 1000, '[1, 1000]')
+        need('min_track_speed', 0 <= self.min_track_speed <= 50, '[0, 50] m/s')
         need('min_part_length', 0 <= self.min_part_length <= 100, '[0, 100] m')
         need('trim_turn_deg', 0 <= self.trim_turn_deg <= 90, '[0, 90]')
         need('min_center_dist', 0 <= self.min_center_dist <= 100, '[0, 100] m')
@@ -165,6 +170,7 @@ class TopologyConfig:
         need('t_start', 0 < self.t_start <= 1e4, '(0, 1e4]')
         need('t_end', 0 < self.t_end <= self.t_start, '(0, t_start]')
         need('anneal_samples', 1 <= self.anneal_samples, '[1, inf)')
+        need('init_peak_frac', 0 < self.init_peak_frac <= 1, '(0, 1]')
         need('refit_sweeps', 0 <= self.refit_sweeps <= 10, '[0, 10]')
         need('polish_samples', 0 <= self.polish_samples, '[0, inf)')
         need('reheat_fraction', 0 <= self.reheat_fraction <= 1, '[0, 1]')
@@ -338,7 +344,8 @@ class TopologyEstimator:
         c = initial_center(p, o, w)
         if c is None:
             return
-        angles = initial_arm_angles(p, o, w, c, math.radians(cfg.min_sep_deg), cfg.max_arms)
+        angles = initial_arm_angles(p, o, w, c, math.radians(cfg.min_sep_deg), cfg.max_arms,
+                                    peak_frac=cfg.init_peak_frac)
         angles = self._complete_arms(angles, o, w)
         obs = preprocess(self._dets, c, self._pcfg, angles)
         c, guess = initial_lanes(obs, c, angles, cfg.lane_width, cfg.max_lanes, cfg.gap_max,

@@ -62,8 +62,8 @@ def test_easy_point_detection_scenes_give_the_arms(mode, k):
     assert len(est.best.arms) == len(gt.arms)
     for a in gt.arms:
         assert min(abs((a.angle - b.angle + math.pi) % (2 * math.pi) - math.pi)
-                   for b in est.best.arms) < math.radians(4)
-    assert np.hypot(*(est.best.center - gt.center)) < 2.0
+                   for b in est.best.arms) < math.radians(6)
+    assert np.hypot(*(est.best.center - gt.center)) < 4.0
     assert est.state in ('CONVERGING', 'CONVERGED')
     assert all(0.0 <= a.confidence <= 1.0 for a in est.best.arms)
 
