@@ -135,7 +135,10 @@ def replay(bags: list[str], out: str | Path, *, params_file: str | None = None, 
                 next_tick += period_ns
         if next_tick is not None:
             n_ticks += _tick(ingest, estimator, budget_mode, writer, values, next_tick)
-        truncated = '; '.join(str(p) for p in reader.problems)
+        damage = [str(p) for p in reader.problems]
+        if n_msgs < total:          # corrupt bytes inside a readable chunk: skipped, but not silently
+            damage.append(f'{total - n_msgs} of {total} indexed messages could not be read')
+        truncated = '; '.join(damage)
     if writer is not None:
         writer.close()
         _single_mcap(out / '.output_bag', out / 'output.mcap')
@@ -230,8 +233,14 @@ def _main(args) -> int:
         summary = replay(args.bags, args.out, params_file=args.params, seed=args.seed,
                          budget_mode=args.budget_mode, progress=not args.quiet)
     except (BagError, ValueError, OSError) as exc:
-        print(f'replay: {exc}', file=sys.stderr)
+        print(f'replay: {_one_line(exc)}', file=sys.stderr)
         return 1
+    except Exception as exc:  # noqa: BLE001 - whatever a damaged bag provokes: one line, not a traceback
+        print(f'replay: failed: {type(exc).__name__}: {_one_line(exc)}', file=sys.stderr)
+        return 1
+    if summary.truncated:
+        print(f'replay: bag damaged ({_one_line(summary.truncated)}); wrote the estimate from the '
+              f'{summary.messages} messages that could be read', file=sys.stderr)
     if args.json:
         print(json.dumps({'messages': summary.messages, 'ticks': summary.ticks, 'files': summary.files,
                           'dropped': summary.dropped, 'wall_s': summary.wall_s,
@@ -239,6 +248,10 @@ def _main(args) -> int:
     else:
         print('\n'.join(summary.lines()))
     return 2 if summary.truncated else 0
+
+
+def _one_line(text) -> str:
+    return ' '.join(str(text).split())
 
 
 def bundled_bag(name: str = 'tracked') -> Path:
