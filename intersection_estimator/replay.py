@@ -3,8 +3,10 @@
 Offline and deterministic by default: messages are fed in bag order through the same
 :class:`~.ingest.Ingest` and :class:`~.pipeline.OnlineEstimator` as the node, ticks fall
 at the node's period in *bag time*, and each tick spends a sample budget (so the result
-does not depend on machine speed; ``--budget-mode wall`` spends the node's wall budget
-instead). Writes ``estimate.json``, ``lanelets.osm``, ``estimate.png`` and
+does not depend on machine speed, and ``estimate.json`` is byte-identical for the same bag
+and seed: its ``stats.elapsed_s`` is 0, the wall time is in the printed summary;
+``--budget-mode wall`` spends the node's wall budget instead). Writes ``estimate.json``,
+``lanelets.osm``, ``estimate.png`` and
 ``output.mcap`` (the node's ``~/topology``, ``~/lanelets``, ``~/markers``).
 ``--live`` instead publishes the bag over DDS at bag rate for a running node.
 """
@@ -143,7 +145,7 @@ def replay(bags: list[str], out: str | Path, *, params_file: str | None = None, 
         writer.close()
         _single_mcap(out / '.output_bag', out / 'output.mcap')
     result = estimator.result if n_ticks else None
-    files = _write_files(out, result, estimator, values) if write_outputs else {}
+    files = _write_files(out, result, estimator, values, budget_mode == 'samples') if write_outputs else {}
     if writer is not None:
         files['output'] = str(out / 'output.mcap')
     return ReplaySummary(n_msgs, n_ticks, result, files, dict(ingest.dropped),
@@ -181,12 +183,15 @@ def _single_mcap(bag_dir: Path, target: Path) -> None:
     shutil.rmtree(bag_dir)
 
 
-def _write_files(out: Path, result, estimator, values) -> dict:
+def _write_files(out: Path, result, estimator, values, deterministic: bool = True) -> dict:
     from .estimate_io import write_estimate
     files = {}
     I = None if result is None else result.intersection
     lanelets = [] if result is None else result.lanelets
     stats = {} if result is None else result.stats()
+    if deterministic and stats:
+        # same bag + seed -> byte-identical estimate.json: no wall time in it (the summary has it)
+        stats['elapsed_s'] = 0.0
     files['estimate'] = str(write_estimate(out / 'estimate.json', I, lanelets, stats))
     if I is not None:
         from .export.osm import write_osm
