@@ -403,6 +403,8 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
             e = isa[i] * 2.0 * (1.0 - abs(c))     # von Mises: 2(1 - cos) ~ angle^2
         else:
             d = dcls[i]
+            if d == 0.0:              # unknown direction: the side of the median decides
+                d = 1.0 if t * ts > 0.0 else -1.0
         if e >= cut:
             out[i] = 0.0
             continue
@@ -638,6 +640,8 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             e = isa[i] * 2.0 * (1.0 - abs(c))     # von Mises: 2(1 - cos) ~ angle^2
         else:
             d = dcls[i]
+            if d == 0.0:
+                d = 1.0 if t * ts > 0.0 else -1.0
         dd[i] = d
         tl[i] = d * ts * t
         base[i] = e + (isp[i] * s * s if s < 0.0 else 0.0)

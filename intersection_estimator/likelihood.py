@@ -50,7 +50,8 @@ class ObservationSet:
 
     x, y: mean position; hx, hy: unit orientation (0 if none); has_o: orientation known;
     d: driving direction relative to the center (+1 entering, -1 leaving), used when
-    there is no orientation; w: weight (voxel count or 1 per trajectory part);
+    there is no orientation (0: unknown, e.g. radar seeing a vehicle cross its line of
+    sight -- the side of the arm's median then decides); w: weight (voxel count or 1 per trajectory part);
     sigma: orthogonal-distance sigma [m] (a trajectory mean is far more precise than a
     single detection); sigma_ang: angle sigma [rad] (heading of a track vs. a local
     principal direction of radar points).
@@ -115,7 +116,8 @@ def log_likelihood_reference(S: np.ndarray, obs: ObservationSet, P: np.ndarray) 
         s = p @ u
         t = p @ nrm
         dot = obs.hx * u[0] + obs.hy * u[1]
-        d = np.where(obs.has_o, np.where(dot < 0, 1.0, -1.0), obs.d)
+        d_side = np.where(t * P[K.P_TRAFFIC] > 0, 1.0, -1.0)    # unknown direction (d == 0)
+        d = np.where(obs.has_o, np.where(dot < 0, 1.0, -1.0), np.where(obs.d == 0, d_side, obs.d))
         ang2 = np.where(obs.has_o, 2.0 * (1.0 - np.abs(dot)), 0.0)    # von Mises
         dens = np.zeros(len(obs))
         for direction, nl in ((1.0, int(nin)), (-1.0, int(nout))):

@@ -53,6 +53,8 @@ class PreprocessConfig:
     weight_scale: float = 1.0
     min_doppler: float = 0.5            # [m/s] |doppler| below: static -> dropped
     min_rcs: float = 0.0                # [dBsm] below: clutter -> dropped (NaN rcs kept)
+    min_rcs_static: float = 5.0         # [dBsm] |doppler| small but RCS this high: a vehicle
+    keep_unknown_direction: bool = True  # radar rows of unknown direction kept (d = 0)
     min_radial_cos: float = 0.25        # |<r, los>| below: direction ambiguous -> dropped
     min_part_points: int = 3            # trajectory parts with fewer points are dropped
     min_part_length: float = 5.0        # [m] ... or shorter extent (static false tracks)
@@ -155,11 +157,18 @@ def _path_heading(p: np.ndarray) -> np.ndarray:
     return np.arctan2(d[:, 1], d[:, 0])
 
 
-def radar_filter(dets: Detections, cfg: PreprocessConfig) -> np.ndarray:
-    """Mask of radar rows that survive the Doppler / RCS clutter filter (paper §II-A)."""
-    m = (dets.track_id < 0) & np.isfinite(dets.doppler) & (np.abs(dets.doppler) >= cfg.min_doppler)
+def radar_filter(dets: Detections, cfg: PreprocessConfig, moving_only: bool = True) -> np.ndarray:
+    """Mask of radar rows that survive the Doppler / RCS clutter filter (paper §II-A).
+
+    ``moving_only=False`` keeps rows with small |Doppler| whose RCS is known and at least
+    ``min_rcs_static`` (vehicles crossing the line of sight, not clutter)."""
     rcs = dets.rcs
+    radar = (dets.track_id < 0) & np.isfinite(dets.doppler)
+    m = radar & (np.abs(dets.doppler) >= cfg.min_doppler)
     m &= ~(np.isfinite(rcs) & (rcs < cfg.min_rcs))
+    if not moving_only and cfg.min_rcs_static < np.inf:
+        with np.errstate(invalid='ignore'):
+            m |= radar & np.isfinite(rcs) & (rcs >= cfg.min_rcs_static)
     return m
 
 
@@ -173,7 +182,7 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     lateral band on both sides along the arm are dropped -- they are not on a straight
     lane (turning vehicles inside the box, isolated clutter). Otherwise square voxels.
     """
-    m = radar_filter(dets, cfg)
+    m = radar_filter(dets, cfg, moving_only=False)
     if not m.any():
         return ObservationSet.empty()
     c = np.asarray(center, float)
@@ -188,16 +197,20 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
         rx, ry = np.cos(np.asarray(arm_angles))[arm], np.sin(np.asarray(arm_angles))[arm]
         okr = okr & (s_arm > 0)
     proj = rx * lx + ry * ly
-    keep = okr & okl & (np.abs(proj) >= cfg.min_radial_cos)
-    d = np.where(dop * proj > 0, -1.0, 1.0)[keep]
-    cls = (d > 0).astype(np.int64)
+    keep = okr & okl
+    # direction from the Doppler sign; unknown (class 2, d = 0) where the motion is across
+    # the line of sight or the Doppler is too small to tell
+    unknown = (np.abs(proj) < cfg.min_radial_cos) | (np.abs(dop) < cfg.min_doppler)
+    if not cfg.keep_unknown_direction:
+        keep &= ~unknown
+    cls = np.where(unknown, 2, np.where(dop * proj > 0, 0, 1))[keep].astype(np.int64)
     if arm_mode:
         vxy, vcls, cnt = _arm_voxels(xy[keep], cls, arm[keep], s_arm[keep], t_arm[keep],
                                      ts[keep], cfg)
     else:
         vxy, vcls, cnt, _ = voxelise(xy[keep], cls, cfg.voxel_size, t=ts[keep],
                                      gap=cfg.passage_gap)
-    dcls = np.where(vcls > 0, 1.0, -1.0)
+    dcls = np.select([vcls == 1, vcls == 0], [1.0, -1.0], 0.0)
     n = len(vxy)
     z = np.zeros(n)
     obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), z, z.copy(), np.zeros(n, np.bool_),
@@ -223,24 +236,24 @@ def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
     Returns mean position, class, weight in vehicle passages (and summed ``vec``)."""
     si = np.floor(s / cfg.voxel_length).astype(np.int64)
     ti = np.floor(t / cfg.voxel_width).astype(np.int64)
-    key = ((arm * 1024 + si + 512) * 4096 + ti + 2048) * 2 + cls
+    key = ((arm * 1024 + si + 512) * 4096 + ti + 2048) * 4 + cls
     uk, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     p = xy
     mean = np.stack([np.bincount(inv, p[:, 0], len(uk)), np.bincount(inv, p[:, 1], len(uk))],
                     axis=1) / cnt[:, None]
     if cfg.straight_run:   # occupied neighbour (lateral band +-1) before and after
-        step = 4096 * 2
+        step = 4096 * 4
         before = np.zeros(len(uk), bool)
         after = np.zeros(len(uk), bool)
-        for dt in (-2, 0, 2):
+        for dt in (-4, 0, 4):
             before |= np.isin(uk - step + dt, uk, assume_unique=True)
             after |= np.isin(uk + step + dt, uk, assume_unique=True)
         keepv = before & after
     else:
         keepv = np.ones(len(uk), bool)
     # detections per vehicle passage of an along-arm bin (all lateral bins together)
-    band = (arm * 1024 + si + 512) * 2 + cls
+    band = (arm * 1024 + si + 512) * 4 + cls
     ub, binv = np.unique(band, return_inverse=True)
     n_pass = passages(binv.reshape(-1), stamp, len(ub), cfg.passage_gap).sum()
     per_pass = len(xy) / max(n_pass, 1.0) if cfg.passage_gap > 0 else 1.0
@@ -250,10 +263,10 @@ def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
                        np.bincount(inv, vec[:, 1], len(uk))], axis=1)
     uk, mean, cnt, sv = uk[keepv], mean[keepv], cnt[keepv].astype(np.float64), sv[keepv]
     if cfg.voxel_merge > 1:   # fewer, longer voxels for the sampler (filter ran at full res.)
-        si_k = (uk // (4096 * 2)) % 1024
-        arm_k = uk // (4096 * 2 * 1024)
-        rest = uk % (4096 * 2)
-        key2 = (arm_k * 1024 + si_k // cfg.voxel_merge) * (4096 * 2) + rest
+        si_k = (uk // (4096 * 4)) % 1024
+        arm_k = uk // (4096 * 4 * 1024)
+        rest = uk % (4096 * 4)
+        key2 = (arm_k * 1024 + si_k // cfg.voxel_merge) * (4096 * 4) + rest
         u2, inv2 = np.unique(key2, return_inverse=True)
         inv2 = inv2.reshape(-1)
         c2 = np.bincount(inv2, cnt, len(u2))
@@ -263,8 +276,8 @@ def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
                       axis=1)
         uk, cnt = u2, c2
     if vec is not None:
-        return mean, uk % 2, cnt / per_pass, sv
-    return mean, uk % 2, cnt / per_pass
+        return mean, uk % 4, cnt / per_pass, sv
+    return mean, uk % 4, cnt / per_pass
 
 
 def heading_observations(dets: Detections, center, cfg: PreprocessConfig,

@@ -87,6 +87,8 @@ class TopologyConfig:
     weight_scale: float = 0.3
     min_doppler: float = 0.5             # [m/s]
     min_rcs: float = 0.0                 # [dBsm]
+    min_rcs_static: float = 5.0          # [dBsm] slow (crossing) radar rows kept above this
+    keep_unknown_direction: bool = True  # radar rows of unknown direction kept (d = 0)
     min_radial_cos: float = 0.25
     min_part_points: int = 3
     min_part_length: float = 5.0         # [m]
@@ -100,6 +102,7 @@ class TopologyConfig:
     t_end: float = 0.5
     anneal_samples: int = 5000
     init_peak_frac: float = 0.12         # init: direction-histogram peaks above this share
+    refit_every: int = 0                 # also refit every this many samples (0: never)
     refit_sweeps: int = 1                # init: per-arm lane/gap/width coordinate ascent
     polish_samples: int = 1000           # first samples of a new chain: continuous moves only
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule
@@ -440,6 +443,8 @@ class TopologyEstimator:
         advance(c, m, temps, seed, P, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn,
                 self._obs)
         if was_polishing and self._polish_left == 0:
+            self._refit()
+        elif cfg.refit_every and c.step // cfg.refit_every != (c.step - m) // cfg.refit_every:
             self._refit()
         self.samples_drawn += m
         self._since_data += m

@@ -26,7 +26,7 @@ def random_obs(rng, n, center=(0.0, 0.0), spread=60.0):
     has_o = rng.uniform(size=n) < 0.5
     return ObservationSet(xy[:, 0].copy(), xy[:, 1].copy(), np.where(has_o, np.cos(h), 0.0),
                           np.where(has_o, np.sin(h), 0.0), has_o,
-                          np.where(rng.uniform(size=n) < 0.5, 1.0, -1.0),
+                          rng.choice([1.0, -1.0, 0.0], n),
                           rng.uniform(0.5, 5.0, n), rng.uniform(0.3, 2.0, n),
                           rng.uniform(0.05, 0.5, n))
 

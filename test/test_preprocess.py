@@ -83,20 +83,25 @@ def test_doppler_direction_rule_with_line_of_sight():
     # beyond the center on the opposite arm: moving away from the sensor = leaving
     far = radar_observations(_radar([[-30.0, -1.75]], 5.0, sensor), (0.0, 0.0), cfg)
     assert far.d.tolist() == [-1.0]
-    # cross traffic seen at a right angle: ambiguous, dropped
+    # cross traffic seen at a right angle: direction unknown (d = 0), or dropped
     side = radar_observations(_radar([[15.0, 15.0]], 5.0, (30.0, 0.0)), (0.0, 0.0),
                               PreprocessConfig(min_radial_cos=0.25))
+    assert side.d.tolist() == [0.0]
+    side = radar_observations(_radar([[15.0, 15.0]], 5.0, (30.0, 0.0)), (0.0, 0.0),
+                              PreprocessConfig(min_radial_cos=0.25, keep_unknown_direction=False))
     assert len(side) == 0
 
 
 def test_radar_clutter_filter():
     sensor = (30.0, 0.0)
-    dets = Detections.concat([_radar([[10.0, 2.0]], 0.1, sensor),           # static
+    dets = Detections.concat([_radar([[10.0, 2.0]], 0.1, sensor, rcs=-5),   # static clutter
                               _radar([[10.0, 2.0]], 6.0, sensor, rcs=-10),  # weak
                               _radar([[12.0, 2.0]], 6.0, sensor, rcs=np.nan),
-                              _radar([[14.0, 2.0]], 6.0, sensor)])
+                              _radar([[14.0, 2.0]], 6.0, sensor),
+                              _radar([[16.0, 2.0]], 0.1, sensor, rcs=12)])  # slow vehicle
     obs = radar_observations(dets, (0.0, 0.0), PreprocessConfig(voxel_size=1.0))
-    assert sorted(obs.x.round(1).tolist()) == [12.0, 14.0]
+    assert sorted(zip(obs.x.round(1).tolist(), obs.d.tolist())) == [(12.0, 1.0), (14.0, 1.0),
+                                                                    (16.0, 0.0)]
 
 
 def test_heading_detections_are_voxelised_with_their_heading():
