@@ -350,6 +350,7 @@ class TopologyEstimator:
         angles = initial_arm_angles(p, o, w, c, math.radians(cfg.min_sep_deg), cfg.max_arms,
                                     peak_frac=cfg.init_peak_frac)
         angles = self._complete_arms(angles, o, w)
+        c0 = c
         obs = preprocess(self._dets, c, self._pcfg, angles)
         c, guess = initial_lanes(obs, c, angles, cfg.lane_width, cfg.max_lanes, cfg.gap_max,
                                  cfg.traffic_side, width_range=(cfg.lane_width_min,
@@ -363,7 +364,7 @@ class TopologyEstimator:
         self._chain = Chain(S=S, C=C, ll=0.0, lp=0.0, best_S=S.copy(), best_lpost=-math.inf,
                             step=0, stats=np.zeros(2 * len(K.MOVE_NAMES), np.int64))
         self._polish_left = cfg.polish_samples
-        self._preprocess(c)
+        self._preprocess(c, obs if np.hypot(*(c - c0)) <= cfg.recenter_threshold else None, c0)
         if cfg.polish_samples == 0:
             self._refit()
 
@@ -408,11 +409,15 @@ class TopologyEstimator:
                 break
         return angles
 
-    def _preprocess(self, center) -> None:
-        S = self._chain.best_S
-        angles = S[K.HDR:K.HDR + int(S[2]) * K.STRIDE:K.STRIDE].copy()
-        self._obs = preprocess(self._dets, center, self._pcfg, angles)
-        self._pp_center = np.asarray(center, float).copy()
+    def _preprocess(self, center, obs=None, obs_center=None) -> None:
+        """(Re-)preprocess around ``center`` (or adopt ``obs`` made around ``obs_center``)
+        and re-score the chain and its best state on the new observations."""
+        if obs is None:
+            S = self._chain.best_S
+            angles = S[K.HDR:K.HDR + int(S[2]) * K.STRIDE:K.STRIDE].copy()
+            obs, obs_center = preprocess(self._dets, center, self._pcfg, angles), center
+        self._obs = obs
+        self._pp_center = np.asarray(obs_center, float).copy()
         self.preprocess_count += 1
         c = self._chain
         c.C = np.zeros((K.MAXA, len(self._obs)))
@@ -473,8 +478,10 @@ def warmup() -> float:
     t0 = time.perf_counter()
     rng = np.random.default_rng(0)
     xy = rng.normal(0, 20, (40, 2))
-    dets = Detections.make(xy, heading=np.arctan2(xy[:, 1], xy[:, 0]),
-                           track_id=np.repeat(np.arange(8), 5), t=np.tile(np.arange(5.0), 8))
+    dets = Detections.concat([
+        Detections.make(xy, heading=np.arctan2(xy[:, 1], xy[:, 0]),
+                        track_id=np.repeat(np.arange(8), 5), t=np.tile(np.arange(5.0), 8)),
+        Detections.make(xy, doppler=rng.normal(0, 5, 40), sensor_xy=(30.0, 0.0), rcs=10.0)])
     est = TopologyEstimator(TopologyConfig(chunk=50), seed=0)
     est.set_observations(dets)
     est.run(n_samples=100)
