@@ -10,13 +10,11 @@ stays at ``t_end``. The best (MAP) state seen is kept. The loop itself is compil
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
-
 import numpy as np
 
 from . import _kernels as K
 
-__all__ = ['temperatures', 'Chain', 'advance']
+__all__ = ['temperatures', 'Chain', 'advance', 'acceptance_rates']
 
 
 def temperatures(k0: int, n: int, t_start: float, t_end: float, anneal_samples: int) -> np.ndarray:
@@ -57,6 +55,3 @@ def acceptance_rates(stats: np.ndarray) -> dict:
     return {name: (int(stats[2 * i]), int(stats[2 * i + 1]))
             for i, name in enumerate(K.MOVE_NAMES)}
 
-
-def is_finite(x: float) -> bool:
-    return math.isfinite(x)
