@@ -104,6 +104,7 @@ class PipelineConfig:
     lane_share: float = 0.6           # share of the wall budget given to the lane course
     lanes_enabled: bool = True
     reset_distance: float = 25.0      # ego past the center by this much -> next intersection [m]
+    restart_growth: float = 1.5       # race a fresh topology chain when the window grew by this factor
     topology: TopologyConfig = field(default_factory=TopologyConfig)
     lanes: LaneConfig = field(default_factory=LaneConfig)
 
@@ -115,7 +116,8 @@ class PipelineConfig:
                   ('lane_samples', self.lane_samples >= 0, '>= 0'),
                   ('budget_s', 0.001 <= self.budget_s <= 10.0, 'in [0.001, 10] s'),
                   ('lane_share', 0.0 <= self.lane_share < 1.0, 'in [0, 1)'),
-                  ('reset_distance', self.reset_distance > 0, '> 0')]
+                  ('reset_distance', self.reset_distance > 0, '> 0'),
+                  ('restart_growth', self.restart_growth > 1.0, '> 1')]
         for name, ok, allowed in checks:
             if not ok:
                 raise ValueError(f'{name}={getattr(self, name)!r} out of range: must be {allowed}')
@@ -151,6 +153,8 @@ class OnlineEstimator:
         self._lanes = LaneCourseEstimator(self.config.lanes, rng_lanes)
         self._lane_key = None
         self._dirty = False
+        self._approached = False
+        self._restart_n, self._races = 0, 0
         self.result = EstimateResult(None, [])
 
     @property
@@ -185,12 +189,16 @@ class OnlineEstimator:
         return dets
 
     def passed(self, ego_xy, ego_yaw: float) -> bool:
-        """True when the ego is ``reset_distance`` past the estimated center."""
+        """True when the ego, seen approaching a converged estimate, is now ``reset_distance``
+        past its center (an early, wrong center behind the ego must not throw data away)."""
         best = self.result.intersection
-        if best is None:
+        if best is None or self.result.state != 'CONVERGED':
             return False
         d = np.asarray(ego_xy, float) - best.center
-        return float(d @ np.array([np.cos(ego_yaw), np.sin(ego_yaw)])) > self.config.reset_distance
+        along = float(d @ np.array([np.cos(ego_yaw), np.sin(ego_yaw)]))
+        if along < 0.0 and float(np.hypot(*d)) < 150.0:
+            self._approached = True
+        return self._approached and along > self.config.reset_distance
 
     def tick(self, now: float, *, wall_budget: bool = False) -> EstimateResult:
         """Spend one tick's budget on the current window and return the best estimate."""
@@ -199,13 +207,15 @@ class OnlineEstimator:
         with self._lock:
             dirty, self._dirty = self._dirty, False
             dets = self._window(now) if dirty else Detections.concat(self._parts)
+        budget = ({'time_budget_s': cfg.budget_s * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)}
+                  if wall_budget else {'n_samples': cfg.topology_samples})
         if dirty:
             self._topo.set_observations(dets)
             self._lane_key = None if self._lane_key is None else ('stale',) + self._lane_key[1:]
-        if wall_budget:
-            self._topo.run(time_budget_s=cfg.budget_s * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0))
-        else:
-            self._topo.run(n_samples=cfg.topology_samples)
+            if len(dets) >= cfg.restart_growth * self._restart_n:
+                budget = self._restart(dets, budget)
+        if budget:
+            self._topo.run(**budget)
         t1 = time.perf_counter()
         best = self._topo.best
         lanelets = self._tick_lanes(best, dets, wall_budget, cfg.budget_s - (t1 - t0))
@@ -215,6 +225,27 @@ class OnlineEstimator:
             self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_key else 0,
             self._topo.best_log_posterior, self._topo.state, len(dets))
         return self.result
+
+    def _restart(self, dets: Detections, budget: dict) -> None:
+        """Race a fresh chain (data-driven initialisation) against the warm one.
+
+        Early on, little data can lead the warm chain into a model (e.g. a straight road
+        far from the real center) that its local moves (paper Alg. 1) cannot leave when
+        the rest of the traffic arrives. Whenever the window has grown by
+        ``restart_growth`` since the last race, both chains get half of this tick's
+        budget and the one with the higher posterior goes on. Returns what is left.
+        """
+        self._restart_n = len(dets)
+        self._races += 1
+        half = {k: (v // 2 if k == 'n_samples' else v / 2) for k, v in budget.items()}
+        rng = np.random.default_rng(np.random.SeedSequence([self._seed, self._resets, self._races]))
+        fresh = TopologyEstimator(self.config.topology, rng)
+        fresh.set_observations(dets)
+        fresh.run(**half)
+        self._topo.run(**half)
+        if _prefers(fresh, self._topo):
+            self._topo = fresh
+        return None
 
     def _tick_lanes(self, best, dets, wall_budget, remaining_s) -> list[Lanelet]:
         cfg = self.config
@@ -232,6 +263,19 @@ class OnlineEstimator:
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
         return self._lanes.lanelets
+
+
+def _prefers(a: TopologyEstimator, b: TopologyEstimator) -> bool:
+    """Does chain ``a``'s best model beat ``b``'s? Each chain preprocesses the data around
+    its own center (trajectory split, Doppler direction, §II-A), so their posteriors are
+    not comparable as they stand: both models are scored under both observation sets."""
+    if a.best is None:
+        return False
+    if b.best is None:
+        return True
+    gain_a = a.best_log_posterior - a.log_posterior(b.best)
+    gain_b = b.best_log_posterior - b.log_posterior(a.best)
+    return gain_a > gain_b
 
 
 def _topology_key(best: Intersection) -> tuple:

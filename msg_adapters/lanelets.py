@@ -15,8 +15,7 @@ KINDS = {'entering': 0, 'leaving': 1, 'connector': 2}
 
 
 def _points(types, pl):
-    Point = types.get('geometry_msgs/msg/Point')
-    return [Point(x=float(x), y=float(y), z=0.0) for x, y in np.asarray(pl, float).reshape(-1, 2)]
+    return types.points(pl)
 
 
 def lanelets_msg(types, header, lanelets, samples: int = 0):

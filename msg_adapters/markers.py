@@ -60,7 +60,7 @@ class _Builder:
         return self.Color(r=r, g=g, b=b, a=a)
 
     def points(self, xy):
-        return [self.Point(x=float(x), y=float(y), z=0.0) for x, y in np.asarray(xy, float).reshape(-1, 2)]
+        return self.types.points(xy)
 
     def marker(self, ns, mid, mtype, color, scale=(0.2, 0.2, 0.2), points=(), position=(0.0, 0.0),
                text='', action=ADD):

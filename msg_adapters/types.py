@@ -71,6 +71,11 @@ class RclpyTypes:
             self._cache[name] = self._factory(cls)
         return self._cache[name]
 
+    def points(self, xy, z: float = 0.0) -> list:
+        """``geometry_msgs/Point`` list for (N, 2) ``xy``."""
+        Point = self.get('geometry_msgs/msg/Point').msgclass
+        return [Point(x=x, y=y, z=z) for x, y in _xy_list(xy)]
+
     @staticmethod
     def _factory(cls):
         kinds = cls.get_fields_and_field_types()
@@ -100,6 +105,10 @@ class RclpyTypes:
         return _scalar(kind, value)
 
 
+def _xy_list(xy) -> list:
+    return np.asarray(xy, dtype=np.float64).reshape(-1, 2).tolist()
+
+
 class RosbagsTypes:
     """rosbags message classes of a ``Typestore``; every field gets a default."""
 
@@ -114,6 +123,11 @@ class RosbagsTypes:
             fields = self.typestore.fielddefs[name][1]
             self._cache[name] = self._factory(cls, fields)
         return self._cache[name]
+
+    def points(self, xy, z: float = 0.0) -> list:
+        """``geometry_msgs/Point`` list for (N, 2) ``xy`` (fast path: polylines are long)."""
+        Point = self.get('geometry_msgs/msg/Point').msgclass
+        return [Point(x, y, z) for x, y in _xy_list(xy)]
 
     def _factory(self, cls, fields):
         def build(**kw):

@@ -110,8 +110,11 @@ def test_tick_resets_when_the_ego_has_passed_the_center(types):
     ingest = Ingest(P.defaults(), types)
     est = OnlineEstimator(P.pipeline_config(P.defaults()))
     assert tick(ingest, est, wall_budget=False) is None          # nothing received yet
-    est.result = EstimateResult(Intersection([0.0, 0.0], [Arm(0.0), Arm(2.0), Arm(-2.0)]), [])
+    est.result = EstimateResult(Intersection([0.0, 0.0], [Arm(0.0), Arm(2.0), Arm(-2.0)]), [],
+                                state='CONVERGED')
     ingest.handle('odometry_topic', odometry_msg(types, T0, 40.0, 0.0, 0.0), est)
     resets = est._resets
+    assert not est.passed((40.0, 0.0), 0.0)      # never seen approaching: an early, wrong center
+    assert not est.passed((-30.0, 0.0), 0.0)     # approaching
     r = tick(ingest, est, wall_budget=False)
     assert est._resets == resets + 1 and r.intersection is None and r.state == 'NO_DATA'
