@@ -139,10 +139,11 @@ class IntersectionEstimatorNode(Node):
         else:
             self.pub_topology.publish(topology_msg(t, header, result.intersection, result.topology_samples,
                                                    result.log_posterior, result.observations, result.state))
-            self.pub_lanelets.publish(lanelets_msg(t, header, result.lanelets, result.lane_samples))
-            markers, self._marker_keys = markers_msg(t, header, result.intersection, result.lanelets,
-                                                     self._marker_keys)
-            self.pub_markers.publish(markers)
+            if result.lanes_updated:   # latched: subscribers keep the last one meanwhile
+                self.pub_lanelets.publish(lanelets_msg(t, header, result.lanelets, result.lane_samples))
+                markers, self._marker_keys = markers_msg(t, header, result.intersection, result.lanelets,
+                                                         self._marker_keys)
+                self.pub_markers.publish(markers)
         self._tick_ms.append((time.perf_counter() - t0) * 1e3)
         self._tick_ms = self._tick_ms[-100:]
         self.pub_diag.publish(self._diagnostics(header, result))

@@ -65,6 +65,8 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('lane_samples', 20000, 'lane-course samples per tick in sample-budget mode (replay)', 0, 10**8),
     ParamSpec('window_s', 120.0, 'observations older than this are forgotten [s]', 1.0, 3600.0),
     ParamSpec('max_observations', 200000, 'cap on observations kept in the window', 100, 10**7),
+    ParamSpec('lane_period', 1.0, 'lane course re-estimated at most this often (at once on a new '
+              'topology) [s]', 0.0, 60.0),
     ParamSpec('lanes_enabled', True, 'estimate the lane course (needs tracked objects)'),
     ParamSpec('reset_distance', 25.0, 'ego past the center by this -> start on the next intersection [m]',
               1.0, 1000.0),
@@ -141,7 +143,7 @@ def pipeline_config(values: dict):
                   topology_samples=int(values['topology_samples']),
                   lane_samples=int(values['lane_samples']),
                   budget_s=float(values['budget_ms']) / 1e3, lane_share=float(values['lane_share']),
-                  lanes_enabled=bool(values['lanes_enabled']),
+                  lanes_enabled=bool(values['lanes_enabled']), lane_period=float(values['lane_period']),
                   reset_distance=float(values['reset_distance']))
     cfg.validate()
     return cfg

@@ -34,6 +34,7 @@ class EstimateResult:
     log_posterior: float = float('-inf')
     state: str = 'NO_DATA'
     observations: int = 0
+    lanes_updated: bool = True        # lanelets differ from the previous tick's
 
     def stats(self) -> dict:
         return {'topology_samples': int(self.topology_samples), 'lane_samples': int(self.lane_samples),
@@ -103,6 +104,7 @@ class PipelineConfig:
     budget_s: float = 0.150           # per tick, in wall budget mode [s]
     lane_share: float = 0.6           # share of the wall budget given to the lane course
     lanes_enabled: bool = True
+    lane_period: float = 1.0          # lane course at most this often (stamp time) [s]
     reset_distance: float = 25.0      # ego past the center by this much -> next intersection [m]
     restart_growth: float = 1.5       # race a fresh topology chain when the window grew by this factor
     topology: TopologyConfig = field(default_factory=TopologyConfig)
@@ -116,6 +118,7 @@ class PipelineConfig:
                   ('lane_samples', self.lane_samples >= 0, '>= 0'),
                   ('budget_s', 0.001 <= self.budget_s <= 10.0, 'in [0.001, 10] s'),
                   ('lane_share', 0.0 <= self.lane_share < 1.0, 'in [0, 1)'),
+                  ('lane_period', 0.0 <= self.lane_period <= 60.0, 'in [0, 60] s'),
                   ('reset_distance', self.reset_distance > 0, '> 0'),
                   ('restart_growth', self.restart_growth > 1.0, '> 1')]
         for name, ok, allowed in checks:
@@ -152,6 +155,7 @@ class OnlineEstimator:
         self._topo = TopologyEstimator(self.config.topology, rng_topo)
         self._lanes = LaneCourseEstimator(self.config.lanes, rng_lanes)
         self._lane_key = None
+        self._lane_t = -np.inf
         self._dirty = False
         self._approached = False
         self._restart_n, self._races = 0, 0
@@ -218,12 +222,12 @@ class OnlineEstimator:
             self._topo.run(**budget)
         t1 = time.perf_counter()
         best = self._topo.best
-        lanelets = self._tick_lanes(best, dets, wall_budget, cfg.budget_s - (t1 - t0))
+        lanelets = self._tick_lanes(best, dets, now, wall_budget, cfg.budget_s - (t1 - t0))
         t2 = time.perf_counter()
         self.result = EstimateResult(
             best, lanelets, {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3},
             self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_key else 0,
-            self._topo.best_log_posterior, self._topo.state, len(dets))
+            self._topo.best_log_posterior, self._topo.state, len(dets), self._lanes_updated)
         return self.result
 
     def _restart(self, dets: Detections, budget: dict) -> None:
@@ -247,13 +251,21 @@ class OnlineEstimator:
             self._topo = fresh
         return None
 
-    def _tick_lanes(self, best, dets, wall_budget, remaining_s) -> list[Lanelet]:
+    def _tick_lanes(self, best, dets, now, wall_budget, remaining_s) -> list[Lanelet]:
+        """Lane course (§III) at most every ``lane_period`` of stamp time, and at once when
+        the topology it rests on changed; in between the last lanelets stand."""
         cfg = self.config
+        self._lanes_updated = True
         if best is None:
             return []
         if not cfg.lanes_enabled or not dets.has_tracks:
             return lanelets_from_topology(best)
         key = _topology_key(best)
+        same_topology = self._lane_key is not None and self._lane_key[1:] == key[1:]
+        if same_topology and now - self._lane_t < cfg.lane_period:
+            self._lanes_updated = False
+            return self._lanes.lanelets
+        self._lane_t = now
         if self._lane_key != key:
             self._lanes.initialise(best, dets)
             self._lane_key = key

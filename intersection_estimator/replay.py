@@ -165,7 +165,7 @@ def _tick(ingest, estimator, budget_mode, writer, values, t_ns) -> int:
     topo = topology_msg(types, header, result.intersection, result.topology_samples,
                         result.log_posterior, result.observations, result.state)
     writer.write(OUTPUT_TOPICS['topology'][0], topo, t)
-    if result.intersection is not None:
+    if result.intersection is not None and result.lanes_updated:
         writer.write(OUTPUT_TOPICS['lanelets'][0], lanelets_msg(types, header, result.lanelets,
                                                                 result.lane_samples), t)
         markers, writer.marker_keys = markers_msg(types, header, result.intersection, result.lanelets,
