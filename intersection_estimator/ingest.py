@@ -180,7 +180,8 @@ class Ingest:
     # -- plausibility ----------------------------------------------------------------------------
     def _clean(self, role: str, dets):
         """Drop detections with absurd (finite) coordinates (they would overflow the estimator)
-        and all but the first object of a track id that occurs twice in one message."""
+        and the objects whose track id occurs more than once in one message (one id, two
+        places: a track that would zig-zag between vehicles)."""
         far = ~(np.abs(dets.xy) <= MAX_COORD).all(axis=1) & np.isfinite(dets.xy).all(axis=1)
         if far.any():
             self.drop('out_of_range', f'{role}: dropped {int(far.sum())} detection(s) beyond '
@@ -188,12 +189,12 @@ class Ingest:
             dets = dets.subset(~far)
         ids = dets.track_id
         if len(ids) > 1 and (ids >= 0).any():
-            first = np.zeros(len(ids), bool)
-            first[np.unique(ids, return_index=True)[1]] = True
-            dup = ~first & (ids >= 0)
+            # which of the objects the id belongs to is unknowable: drop them all, keep the rest
+            uniq, counts = np.unique(ids, return_counts=True)
+            dup = np.isin(ids, uniq[counts > 1]) & (ids >= 0)
             if dup.any():
                 self.drop('duplicate_id', f'{role}: dropped {int(dup.sum())} object(s) whose track id '
-                          'occurs twice in one message')
+                          'occurs more than once in one message')
                 dets = dets.subset(~dup)
         return dets
 
