@@ -20,8 +20,8 @@ from ..model import Intersection, Lanelet
 from ..observations import Detections
 from .config import MODES, SimConfig
 from .scenario import build_lanelets, random_intersection, stop_distances
-from .sensors import FALSE_TRACK_ID0, sensor_rng, simulate_detections
-from .traffic import EgoTrajectory, Track, choose_routes, make_ego, make_tracks
+from .sensors import FALSE_TRACK_ID0, scene_sensor_range, sensor_rng, simulate_detections
+from .traffic import EgoTrajectory, Track, choose_routes, make_ego, make_tracks, n_cover
 
 __all__ = ['SimConfig', 'Scenario', 'simulate_scenario', 'MODES', 'FALSE_TRACK_ID0',
            'Track', 'EgoTrajectory']
@@ -40,6 +40,7 @@ class Scenario:
     ego: EgoTrajectory
     duration: float
     stop: np.ndarray                 # stop-line distance per arm [m]
+    sensor_range: float = 100.0      # this scene's range (see sensors.scene_sensor_range)
     sensors: tuple = MODES           # streams a bag writer should record
     _cache: dict = field(default_factory=dict, repr=False)
 
@@ -48,7 +49,8 @@ class Scenario:
         if key not in self._cache:
             rng = sensor_rng(self.seed, mode, rng_seed_offset)
             self._cache[key] = simulate_detections(rng, mode, self.tracks, self.ego,
-                                                   self.gt.center, self.config)
+                                                   self.gt.center, self.config,
+                                                   self.sensor_range)
         return self._cache[key]
 
     def detections(self, mode: str, rng_seed_offset: int = 0) -> Detections:
@@ -72,12 +74,16 @@ def simulate_scenario(seed: int, config: SimConfig = SimConfig()) -> Scenario:
     stop = stop_distances(g_geo, inter, config)
     lanelets = build_lanelets(g_lanes, inter, config, stop)
     duration = float(g_traffic.uniform(*config.duration))
+    ego = make_ego(g_ego, inter, lanelets, config, duration)
     routes, _ = choose_routes(g_traffic, lanelets, config)
-    tracks = make_tracks(g_traffic, lanelets, routes, config, duration)
+    n_obs = n_cover(routes, lanelets) if config.cover_all_lanes else 0
+    rng_m = scene_sensor_range(ego, lanelets, config)
+    tracks = make_tracks(g_traffic, lanelets, routes, config, duration, ego=ego, n_observed=n_obs,
+                         sensor_range=rng_m)
     counts = {ll.id: 0 for ll in lanelets}
     for tr in tracks:
         for lid in tr.route:
             counts[lid] += 1
-    ego = make_ego(g_ego, inter, lanelets, config, duration)
     return Scenario(seed=int(seed), config=config, gt=inter, gt_lanelets=lanelets,
-                    traffic=counts, tracks=tracks, ego=ego, duration=duration, stop=stop)
+                    traffic=counts, tracks=tracks, ego=ego, duration=duration, stop=stop,
+                    sensor_range=rng_m)

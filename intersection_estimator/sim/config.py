@@ -3,6 +3,22 @@
 Ranges are closed ``(low, high)`` tuples unless the name says otherwise. Every random
 draw of the simulator goes through a ``numpy.random.Generator`` seeded from the
 scenario seed, so a ``(seed, SimConfig)`` pair fixes the whole scenario.
+
+Observed traffic on every lane (Table I: "vehicles traveling alongside the lanes").
+With ``cover_all_lanes`` each entering and leaving lane gets one *covering* route, and
+that route is scheduled so that the sensors actually see it: its start time is drawn
+(same single uniform draw as any other route, so the rest of the scene is unchanged)
+among the sensor cycles at which both its entering and its leaving lane are inside the
+scenario's time window and the sensor range over >= ``min_observed_length`` metres of
+the ``observed_zone`` metres next to the stop line (best start if none; ~0.1 % of covering
+routes). With ``auto_sensor_range`` the range of a scene is ``sensor_range`` raised, in
+10 m steps, until the sensor on the stopped ego covers the ``observed_zone`` of every
+arm plus 5 m: stop lines of wide 5-arm intersections lie up to ~50 m from the center, so
+a fixed 100 m missed far arms (seeds 0..199: 41 % of scenes raised, median 100 m, max
+130 m -- a 360 deg radar/lidar setup). Routes, counts (<= ``max_traj_per_lane``),
+durations and geometry are unchanged. Measured with 'tracked' detections (>= 5 within
+1 m of the center line, heading within 30 deg, spanning >= 20 m), seeds 0..199: every
+lane observed in 66.5 % of scenes before, 100 % after (seeds 1000..1299: 100 %).
 """
 
 from __future__ import annotations
@@ -32,7 +48,9 @@ class SimConfig:
     # --- traffic (paper §IV: <= 6 trajectories per lane) ---------------------------
     max_traj_per_lane: int = 6
     traj_per_lane: tuple[float, float] = (2.0, 5.0)  # target mean per entering lane
-    cover_all_lanes: bool = True                    # every lane gets >= 1 trajectory
+    cover_all_lanes: bool = True                    # every lane gets >= 1 observed trajectory
+    min_observed_length: float = 30.0               # ... seen over >= this [m] of the lane's
+    observed_zone: float = 40.0                     # ... first/last this [m] at the stop line
     duration: tuple[float, float] = (20.0, 40.0)    # scenario length [s]
     cruise_speed: tuple[float, float] = (8.0, 14.0)  # approach speed [m/s]
     max_lat_acc: float = 2.5                        # turn speed limit v^2 * kappa [m/s^2]
@@ -45,7 +63,8 @@ class SimConfig:
     sensor_mount: float = 3.7                       # radar ahead of the ego origin [m]
     # --- sensors ------------------------------------------------------------------
     rate_hz: float = 10.0                           # sensor cycle (all sensors)
-    sensor_range: float = 100.0                     # around the ego sensor [m]
+    sensor_range: float = 100.0                     # around the ego sensor [m], at least
+    auto_sensor_range: bool = True                  # raise it per scene to see every arm
     position_noise: float = 1.0                     # N(0, sigma) on every detection [m]
     heading_noise_deg: float = 5.0                  # tracked / heading detections
     speed_noise: float = 0.3                        # tracked speed [m/s]

@@ -1,7 +1,8 @@
 """Simulated perception output in the fixed frame (paper §II-A inputs, §IV noise model).
 
 Every sensor runs at ``rate_hz`` on the ego vehicle and sees vehicles within
-``sensor_range`` of the sensor (360 deg, no occlusion). Modes:
+``sensor_range`` of the sensor (360 deg, no occlusion; per scene raised by
+:func:`scene_sensor_range` so that every arm is seen near the stop line). Modes:
 
 * ``'tracked'`` -- one row per vehicle and cycle: position + N(0, position_noise),
   heading, speed, persistent ``track_id`` (= the vehicle's index), label CAR. False
@@ -28,7 +29,7 @@ from ..model import wrap_angle
 from ..observations import Detections
 from .config import MODES, SimConfig
 
-__all__ = ['FALSE_TRACK_ID0', 'CAR', 'sensor_rng', 'simulate_detections']
+__all__ = ['FALSE_TRACK_ID0', 'CAR', 'sensor_rng', 'scene_sensor_range', 'simulate_detections']
 
 FALSE_TRACK_ID0 = 1_000_000
 CAR = 1  # Autoware label id
@@ -38,6 +39,28 @@ def sensor_rng(seed: int, mode: str, offset: int = 0) -> np.random.Generator:
     """Independent generator per (scenario seed, mode, offset)."""
     ss = np.random.SeedSequence(seed, spawn_key=(1 + MODES.index(mode), int(offset)))
     return np.random.default_rng(ss)
+
+
+def scene_sensor_range(ego, lanelets, cfg: SimConfig) -> float:
+    """Sensor range of one scene: ``cfg.sensor_range``, raised (with ``auto_sensor_range``)
+    until the ego sensor, where the ego stops, sees the ``observed_zone`` metres next to
+    the stop line of every entering and leaving lane plus 5 m, rounded up to 10 m.
+
+    Stop lines of wide 5-arm intersections lie up to ~50 m from the center; from an ego
+    stopped before one of them a fixed 100 m misses the far arms entirely.
+    """
+    if not cfg.auto_sensor_range:
+        return float(cfg.sensor_range)
+    stop_xy = ego.sensor_xy(cfg.sensor_mount)[-1]
+    need = 0.0
+    for ll in lanelets:
+        if ll.kind not in ('entering', 'leaving'):
+            continue
+        c = ll.center if ll.kind == 'leaving' else ll.center[::-1]   # from the stop line out
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c, axis=0), axis=1))])
+        near = c[arc <= cfg.observed_zone]
+        need = max(need, float(np.linalg.norm(near - stop_xy, axis=1).max()))
+    return max(float(cfg.sensor_range), 10.0 * math.ceil((need + 5.0) / 10.0))
 
 
 def _truth(tracks, rate):
@@ -123,11 +146,14 @@ _MAKERS = {'tracked': _tracked, 'raw': _raw, 'heading': _heading}
 
 
 def simulate_detections(rng: np.random.Generator, mode: str, tracks, ego, center,
-                        cfg: SimConfig) -> tuple[Detections, np.ndarray]:
+                        cfg: SimConfig, sensor_range: float | None = None
+                        ) -> tuple[Detections, np.ndarray]:
     """All detections of ``mode`` over the scenario, sorted by stamp; also their cycle index.
 
-    Rows outside the sensor range (from the sensor on the ego at that cycle) are dropped.
+    Rows outside ``sensor_range`` (default ``cfg.sensor_range``; the scene's value from
+    :func:`scene_sensor_range`) of the sensor on the ego at that cycle are dropped.
     """
+    rng_m = float(cfg.sensor_range if sensor_range is None else sensor_range)
     if mode not in _MAKERS:
         raise ValueError(f'unknown mode {mode!r}, expected one of {MODES}')
     n_cyc = len(ego.t)
@@ -137,7 +163,7 @@ def simulate_detections(rng: np.random.Generator, mode: str, tracks, ego, center
     for p in parts:
         cyc = np.asarray(p.pop('cyc'), int)
         ok = (cyc >= 0) & (cyc < n_cyc)
-        ok[ok] = _visible(p['xy'][ok], cyc[ok], sens, cfg.sensor_range)
+        ok[ok] = _visible(p['xy'][ok], cyc[ok], sens, rng_m)
         cols = {k: np.asarray(v)[ok] for k, v in p.items()}
         out.append(Detections.make(cols.pop('xy'), ego.t[cyc[ok]], sensor_xy=sens[cyc[ok]], **cols))
         cycles.append(cyc[ok])

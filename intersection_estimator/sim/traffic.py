@@ -18,7 +18,7 @@ import numpy as np
 from ..model import Intersection, Lanelet
 from .config import SimConfig
 
-__all__ = ['Track', 'EgoTrajectory', 'choose_routes', 'make_tracks', 'make_ego']
+__all__ = ['Track', 'EgoTrajectory', 'choose_routes', 'n_cover', 'make_tracks', 'make_ego']
 
 
 @dataclass
@@ -60,6 +60,8 @@ def choose_routes(rng: np.random.Generator, lanelets: list[Lanelet], cfg: SimCon
 
     With ``cover_all_lanes`` every entering and leaving lane first gets one route (where
     capacity allows), then random routes are added until the target count is reached.
+    The covering routes come first in ``routes``; :func:`make_tracks` schedules the
+    first ``n_cover(routes, lanelets)`` of them so that the sensors observe them.
     """
     routes = _routes(lanelets)
     cap = cfg.max_traj_per_lane
@@ -89,6 +91,18 @@ def choose_routes(rng: np.random.Generator, lanelets: list[Lanelet], cfg: SimCon
             break
         take(free[int(rng.integers(len(free)))])
     return chosen, count
+
+
+def n_cover(routes, lanelets) -> int:
+    """Length of the prefix of ``routes`` needed to cover every entering and leaving lane
+    (the covering routes of :func:`choose_routes` come first)."""
+    need = {ll.id for ll in lanelets if ll.kind in ('entering', 'leaving')}
+    seen: set = set()
+    for i, r in enumerate(routes):
+        if need <= seen:
+            return i
+        seen.update((r[0], r[2]))
+    return len(routes)
 
 
 def _path(route, by_id) -> np.ndarray:
@@ -136,17 +150,68 @@ def _sample(path, s, yaw, v, t0, duration, rate):
     return t, xy, np.interp(sq, s, yaw), np.interp(sq, s, v)
 
 
+def _observed_starts(path, s, t_rel, lanes, sens, rng_m: float, cfg: SimConfig, n_cyc: int):
+    """Start cycles ``j`` (vehicle at the path start at ``t = j / rate``) and, per start,
+    the smallest observed length [m] over the route's entering and leaving lane.
+
+    A path sample is observed when it falls in ``[0, n_cyc)`` and lies within
+    ``rng_m`` of the ego sensor at that cycle; only the ``observed_zone`` metres
+    of each lane next to its stop line count. ``lanes`` are ``(s_lo, s_hi)`` arc ranges.
+    """
+    rate = cfg.rate_hz
+    k_t = np.arange(int(np.floor(t_rel[-1] * rate)) + 1) / rate       # times after start
+    sk = np.interp(k_t, t_rel, s)
+    pk = np.stack([np.interp(sk, s, path[:, 0]), np.interp(sk, s, path[:, 1])], axis=1)
+    starts = np.arange(-len(k_t) + 1, n_cyc)
+    cyc = starts[:, None] + np.arange(len(k_t))[None, :]
+    inside = (cyc >= 0) & (cyc < n_cyc)
+    cc = np.clip(cyc, 0, n_cyc - 1)
+    vis = inside & (np.linalg.norm(pk[None, :, :] - sens[cc], axis=2) <= rng_m)
+    ds = np.diff(sk)
+    both = vis[:, 1:] & vis[:, :-1]
+    seen = np.full(len(starts), np.inf)
+    for lo, hi in lanes:
+        on = (sk[:-1] >= lo) & (sk[1:] <= hi)
+        seen = np.minimum(seen, (both * (ds * on)[None, :]).sum(axis=1))
+    return starts, seen
+
+
 def make_tracks(rng: np.random.Generator, lanelets: list[Lanelet], routes, cfg: SimConfig,
-                duration: float) -> list[Track]:
-    """One vehicle per route, start times spread so that most pass within ``duration``."""
+                duration: float, ego: EgoTrajectory | None = None,
+                n_observed: int = 0, sensor_range: float | None = None) -> list[Track]:
+    """One vehicle per route, start times spread so that most pass within ``duration``.
+
+    The first ``n_observed`` routes (the lane-covering ones) are *guaranteed observed*:
+    their start is drawn (with the same single uniform draw) among the start cycles at
+    which both their entering and leaving lane are seen by the ego sensor over at least
+    ``min_observed_length`` metres of the ``observed_zone`` next to the stop line, or at
+    the best start if none reaches it. Needs ``ego`` and the scene's ``sensor_range``
+    (default ``cfg.sensor_range``); the other routes are drawn as before.
+    """
     by_id = {ll.id: ll for ll in lanelets}
+    sens = ego.sensor_xy(cfg.sensor_mount) if ego is not None else None
     tracks = []
     for i, route in enumerate(routes):
         path = _path(route, by_id)
         s, yaw, kappa = _kinematics(path)
         v = _speed_profile(s, kappa, float(rng.uniform(*cfg.cruise_speed)), cfg)
-        travel = float(np.sum(np.diff(s) / np.maximum(0.5 * (v[1:] + v[:-1]), 0.1)))
-        t0 = float(rng.uniform(-0.3 * travel, max(duration - 0.7 * travel, 0.0)))
+        dt_seg = np.diff(s) / np.maximum(0.5 * (v[1:] + v[:-1]), 0.1)
+        travel = float(np.sum(dt_seg))
+        lo, hi = -0.3 * travel, max(duration - 0.7 * travel, 0.0)
+        u = float(rng.uniform())
+        t0 = lo + (hi - lo) * u
+        if i < n_observed and sens is not None:
+            t_rel = np.concatenate([[0.0], np.cumsum(dt_seg)])
+            n_in, n_con = len(by_id[route[0]].center), len(by_id[route[1]].center)
+            zone = cfg.observed_zone
+            s_in_end, s_out0 = s[n_in - 1], s[n_in + n_con - 2]
+            lanes = ((s_in_end - zone, s_in_end), (s_out0, s_out0 + zone))
+            rng_m = cfg.sensor_range if sensor_range is None else sensor_range
+            starts, seen = _observed_starts(path, s, t_rel, lanes, sens, rng_m, cfg, len(ego.t))
+            ok = np.flatnonzero(seen >= cfg.min_observed_length)
+            if len(ok) == 0:
+                ok = np.flatnonzero(seen >= seen.max() - 1e-9)
+            t0 = float(starts[ok[min(int(u * len(ok)), len(ok) - 1)]]) / cfg.rate_hz
         t, xy, yw, sp = _sample(path, s, yaw, v, t0, duration, cfg.rate_hz)
         if len(t) >= 2:
             tracks.append(Track(id=i, t=t, xy=xy, yaw=np.asarray(yw), speed=np.asarray(sp),
