@@ -18,9 +18,12 @@ arm                  angular gap, 1/2 'split': next to a random arm at U[min_sep
                      gap U[0, gap_max], width U[w_min, w_max] (or the default width).
                      1/2 remove a random arm. Ratios: the add density (mixture over both
                      variants) against 1/|A'| for the removal.
-add/remove    0.15   arm, direction, add/remove, border/median each with probability 1/2.
-lane                 Border: count +-1. Median: count +-1 and gap -+ lane width (the new
-                     lane takes the median strip). Each is the other's reverse; ratio 0.
+add/remove    0.15   arm, direction, add/remove with probability 1/2, then a variant
+lane                 uniformly: border: count +-1; median: count +-1 and gap -+ lane width
+                     (the new lane takes the median strip); rescale (only with a sampled
+                     width): count n -> n' = n +- 1 and width w -> w n/n' (same road
+                     width). Add and remove of a variant are each other's reverse; ratio
+                     0, or the Jacobian log(n/n') for rescale.
 width         0.00   (beyond the paper) lane width of one arm by U[-step, step]; symmetric
 ============  =====  ====================================================================
 
@@ -155,7 +158,8 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
     if kind == K.WIDTH:
         return math.log(pm / n / (2 * P[K.P_W_STEP]))
     if kind == K.LANE:
-        return math.log(pm / n / 8.0)
+        nvar = 3 if P[K.P_SAMPLE_W] > 0 else 2
+        return math.log(pm / n / (4.0 * nvar))
     if kind == K.ADD_ARM:
         new = b[-1]
         lq = math.log(_add_angle_density(a, new[0], P)) + logqn[int(new[2])] + logqn[int(new[3])]

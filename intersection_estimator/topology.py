@@ -99,10 +99,13 @@ class TopologyConfig:
     recenter_window: int = 2500          # ... checked during the first samples after new data
     # --- annealing ------------------------------------------------------------------
     t_start: float = 1.0
-    t_end: float = 0.5
+    t_end: float = 0.2                   # MAP search: cold end (0.5 left raw lane counts
+                                         # 1-5 nats below the truth's posterior)
     anneal_samples: int = 5000
     init_peak_frac: float = 0.12         # init: direction-histogram peaks above this share
-    refit_every: int = 0                 # also refit every this many samples (0: never)
+    refit_every: int = 1000              # also refit every this many samples (0: never):
+                                         # lane count / gap / width jump jointly to the best
+                                         # grid point, which single moves rarely reach
     refit_sweeps: int = 1                # init: per-arm lane/gap/width coordinate ascent
     polish_samples: int = 1000           # first samples of a new chain: continuous moves only
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule

@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from intersection_estimator import _kernels as K
@@ -85,14 +86,18 @@ def test_continuous_moves_are_symmetric(S, kind, seed):
     assert _lq(S, S2, kind) == _lq(S2, S, kind)
 
 
-def _apply_lane_op(S, k, entering, add, median):
+def _apply_lane_op(S, k, entering, add, variant):
+    """-> (S2, log Hastings ratio) of lane-move variant 0 border, 1 median, 2 rescale."""
     S2 = S.copy()
     i = K.HDR + k * K.STRIDE
     j = i + (K.NIN if entering else K.NOUT)
     S2[j] += 1 if add else -1
-    if median:
+    if variant == 1:
         S2[i + K.GAP] += -S[i + K.WID] if add else S[i + K.WID]
-    return S2
+    if variant == 2:     # same road width: w' = w n / n', Jacobian n / n'
+        S2[i + K.WID] = S[i + K.WID] * S[j] / S2[j]
+        return S2, math.log(S[j] / S2[j])
+    return S2, 0.0
 
 
 @SET
@@ -101,17 +106,40 @@ def test_lane_move_has_its_reverse(S, seed):
     ok, lq, S2 = propose_move(S, K.LANE, P, TAB.logqn, seed)
     if not ok:
         return
-    assert lq == 0.0
     found = False
     for k in range(int(S[2])):
         for entering in (True, False):
             for add in (True, False):
-                for median in (True, False):
-                    if np.allclose(_apply_lane_op(S, k, entering, add, median), S2, atol=1e-12):
-                        back = _apply_lane_op(S2, k, entering, not add, median)
+                for variant in (0, 1, 2):
+                    fwd, lq_f = _apply_lane_op(S, k, entering, add, variant)
+                    if np.allclose(fwd, S2, atol=1e-12) and abs(lq - lq_f) < 1e-12:
+                        back, lq_b = _apply_lane_op(S2, k, entering, not add, variant)
                         assert np.allclose(back, S, atol=1e-9)
+                        assert abs(lq_f + lq_b) < 1e-12   # ratios of a pair cancel
                         found = True
     assert found
+
+
+def test_lane_move_rescale_keeps_road_width():
+    """The rescale variant is proposed and keeps lanes x width of the changed direction
+    (4 -> 5 and 5 -> 6 lanes of 3.5 m stay within [w_min, w_max])."""
+    arms = [Arm(angle=a, gap=1.0, lanes_in=4, lanes_out=5, lane_width=3.5)
+            for a in (0.0, math.pi / 2, math.pi, -math.pi / 2)]
+    S = pack_state(Intersection(center=np.zeros(2), arms=arms))
+    seen = 0
+    for seed in range(400):
+        ok, lq, S2 = propose_move(S, K.LANE, P, TAB.logqn, seed)
+        if not ok or lq == 0.0:
+            continue
+        rows, rows2 = arm_rows(S), arm_rows(S2)
+        k = int(np.flatnonzero(np.any(rows != rows2, axis=1))[0])
+        for q in (2, 3):
+            if rows2[k, q] != rows[k, q]:
+                assert rows2[k, q] * rows2[k, 4] == pytest.approx(rows[k, q] * rows[k, 4])
+                assert lq == pytest.approx(math.log(rows[k, q] / rows2[k, q]))
+        assert rows2[k, 1] == rows[k, 1]
+        seen += 1
+    assert seen > 10
 
 
 @SET
