@@ -95,6 +95,8 @@ def _apply_lane_op(S, k, entering, add, variant):
     if variant == 1:
         S2[i + K.GAP] += -S[i + K.WID] if add else S[i + K.WID]
     if variant == 2:     # same road width: w' = w n / n', Jacobian n / n'
+        if S2[j] < 1:
+            return S2, math.nan    # no such proposal (matches nothing)
         S2[i + K.WID] = S[i + K.WID] * S[j] / S2[j]
         return S2, math.log(S[j] / S2[j])
     return S2, 0.0
