@@ -113,7 +113,7 @@ class Ingest:
                 self._add_pose(read_odometry(msg))
                 dets = None
             else:
-                dets = self._clean(role, to_detections(msg, self.ego, self.opts))
+                dets = self._convert(role, msg)
         except AdapterError as exc:
             if exc.reason == 'no_ego_pose' and self._waits_for_pose(msg):
                 self._hold(role, msg)
@@ -178,6 +178,15 @@ class Ingest:
         return stamp
 
     # -- plausibility ----------------------------------------------------------------------------
+    def _convert(self, role: str, msg):
+        """Adapter output, cleaned; rows the adapter removed as NaN/Inf are counted."""
+        dets = to_detections(msg, self.ego, self.opts)
+        bad = getattr(dets, 'non_finite', 0)
+        if bad:
+            self.drop('non_finite', f'{role}: cleaned {bad} non-finite point(s)/object(s)')
+            self.dropped['non_finite'] += bad - 1
+        return self._clean(role, dets)
+
     def _clean(self, role: str, dets):
         """Drop detections with absurd (finite) coordinates (they would overflow the estimator)
         and the objects whose track id occurs more than once in one message (one id, two
@@ -248,7 +257,7 @@ class Ingest:
                 self._pending.append((role, msg))
                 continue
             try:
-                dets = self._clean(role, to_detections(msg, self.ego, self.opts))
+                dets = self._convert(role, msg)
             except AdapterError as exc:
                 self.drop(exc.reason, f'{role}: dropped a held-back message: {exc}')
                 continue

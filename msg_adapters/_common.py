@@ -49,7 +49,8 @@ def quat_from_yaw(yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(x, y, z, w) of rotations about z by ``yaw``."""
     h = 0.5 * np.asarray(yaw, dtype=np.float64)
     z = np.zeros_like(h)
-    return z, z, np.sin(h), np.cos(h)
+    with np.errstate(invalid='ignore'):                  # a non-finite yaw gives a NaN quaternion
+        return z, z, np.sin(h), np.cos(h)
 
 
 def as_u8(data) -> np.ndarray:

@@ -78,13 +78,19 @@ def _origin(ego: EgoPoseBuffer, frame: str, stamp: float, tf, mounts) -> np.ndar
         return np.full(2, np.nan)
 
 
+def _counted(dets: Detections, dropped: int) -> Detections:
+    """Attach how many rows the reader cleaned as non-finite (``dets.non_finite``)."""
+    dets.non_finite = int(dropped)
+    return dets
+
+
 def _radar(cloud: RadarCloud, ego: EgoPoseBuffer, opts: AdapterOptions) -> Detections:
     if len(cloud) == 0:
-        return Detections.empty()
+        return _counted(Detections.empty(), cloud.dropped)
     tf = ego.transform(cloud.frame_id, cloud.stamp, opts.mounts)
-    return Detections.make(apply(tf, cloud.xyz[:, :2]), cloud.stamp, doppler=cloud.doppler,
-                           rcs=cloud.rcs, sensor_xy=_origin(ego, cloud.frame_id, cloud.stamp,
-                                                            tf, opts.mounts))
+    return _counted(Detections.make(apply(tf, cloud.xyz[:, :2]), cloud.stamp, doppler=cloud.doppler,
+                                    rcs=cloud.rcs, sensor_xy=_origin(ego, cloud.frame_id, cloud.stamp,
+                                                                     tf, opts.mounts)), cloud.dropped)
 
 
 @guarded
@@ -103,10 +109,11 @@ def pose_array_detections(msg, ego: EgoPoseBuffer, opts: AdapterOptions = Adapte
     """PoseArray -> Detections with heading in the fixed frame."""
     poses = read_pose_array(msg, max_points=opts.max_points)
     if len(poses) == 0:
-        return Detections.empty()
+        return _counted(Detections.empty(), poses.dropped)
     tf = ego.transform(poses.frame_id, poses.stamp, opts.mounts)
-    return Detections.make(apply(tf, poses.xy), poses.stamp, heading=_wrap(poses.yaw + tf[2]),
-                           sensor_xy=_origin(ego, poses.frame_id, poses.stamp, tf, opts.mounts))
+    return _counted(Detections.make(apply(tf, poses.xy), poses.stamp, heading=_wrap(poses.yaw + tf[2]),
+                                    sensor_xy=_origin(ego, poses.frame_id, poses.stamp, tf, opts.mounts)),
+                    poses.dropped)
 
 
 @guarded
@@ -117,15 +124,20 @@ def object_detections(msg, ego: EgoPoseBuffer, opts: AdapterOptions = AdapterOpt
     if opts.labels is not None:
         keep &= np.isin(objs.label, np.fromiter(opts.labels, dtype=np.int64))
     if not keep.any():
-        return Detections.empty()
+        return _counted(Detections.empty(), objs.dropped)
     tf = ego.transform(objs.frame_id, objs.stamp, opts.mounts)
-    return Detections.make(apply(tf, objs.xy[keep]), objs.stamp, heading=_wrap(objs.yaw[keep] + tf[2]),
-                           speed=objs.speed[keep], track_id=objs.ids[keep], label=objs.label[keep],
-                           sensor_xy=_origin(ego, objs.frame_id, objs.stamp, tf, opts.mounts))
+    return _counted(Detections.make(apply(tf, objs.xy[keep]), objs.stamp,
+                                    heading=_wrap(objs.yaw[keep] + tf[2]), speed=objs.speed[keep],
+                                    track_id=objs.ids[keep], label=objs.label[keep],
+                                    sensor_xy=_origin(ego, objs.frame_id, objs.stamp, tf, opts.mounts)),
+                    objs.dropped)
 
 
 def to_detections(msg, ego: EgoPoseBuffer, opts: AdapterOptions = AdapterOptions()) -> Detections:
-    """Any supported input message -> Detections (Odometry: added to ``ego``, returns empty)."""
+    """Any supported input message -> Detections (Odometry: added to ``ego``, returns empty).
+
+    ``result.non_finite`` (if set) counts the rows the reader removed as NaN/Inf.
+    """
     kind = message_kind(msg)
     if kind == 'odometry':
         ego.add_msg(msg)

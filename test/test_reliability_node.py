@@ -477,10 +477,8 @@ def test_one_odometry_glitch_does_not_move_the_ego_but_a_relocalisation_does(bty
 
 
 def test_nan_points_and_objects_cleaned_by_the_adapters_are_counted(btypes):
-    """KNOWN FAILURE (msg_adapters): read_pointcloud2 / read_objects drop non-finite points and
-    objects and count them in RadarCloud.dropped / ObjectList.dropped, but to_detections does not
-    pass that count on, so the node cleans them without a warning or a dropped_* count (issue 8:
-    every malformed input is counted in /diagnostics)."""
+    """The readers drop non-finite points and objects; the count reaches Ingest (and so
+    /diagnostics as dropped_non_finite) with one rate-limited warning (issue 8)."""
     from msg_adapters.pointcloud2 import radar_cloud_msg
     from msg_adapters.types import make_header
     ingest, sink = _ingest(btypes)
@@ -488,4 +486,4 @@ def test_nan_points_and_objects_cleaned_by_the_adapters_are_counted(btypes):
     ingest.handle('radar_topics', radar_cloud_msg(btypes, make_header(btypes, 'map', T0), xyz, np.zeros(4)), sink)
     ingest.handle('object_topics', _objects(btypes, T0, [(1.0, 2.0), (np.nan, 0.0)]), sink)
     assert sum(len(p) for p in sink.parts) == 3             # cleaned: 2 + 1 finite rows kept
-    assert ingest.dropped['non_finite'] >= 2, dict(ingest.dropped)
+    assert ingest.dropped['non_finite'] == 3, dict(ingest.dropped)   # 2 points + 1 object
