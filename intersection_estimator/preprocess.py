@@ -61,6 +61,7 @@ class PreprocessConfig:
     min_track_speed: float = 3.0        # [m/s] tracks never faster than this are static
     trim_turn_deg: float = 15.0         # keep a part's straight run (0: whole part, paper)
     min_center_dist: float = 0.0        # [m] observations closer to the center dropped
+    arm_reach: float = 18.0             # [m] rows farther from every arm's axis: on no arm
 
 
 def _unit(vx, vy):
@@ -180,7 +181,9 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     ``voxel_length`` along it, ``voxel_width`` across, so a voxel never mixes lanes yet
     covers a long piece of one; voxels without an occupied neighbour voxel in the same
     lateral band on both sides along the arm are dropped -- they are not on a straight
-    lane (turning vehicles inside the box, isolated clutter). Otherwise square voxels.
+    lane (turning vehicles inside the box, isolated clutter). Rows on no current arm are
+    voxelised along rays from the center (:func:`_ray_voxels`). Without arms: square
+    voxels.
     """
     m = radar_filter(dets, cfg, moving_only=False)
     if not m.any():
@@ -191,11 +194,10 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     has_s = np.isfinite(sxy).all(axis=1)
     lx, ly, okl = _unit(xy[:, 0] - np.where(has_s, sxy[:, 0], c[0]),
                         xy[:, 1] - np.where(has_s, sxy[:, 1], c[1]))
-    arm_mode = arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0
-    if arm_mode:   # the lane direction is the arm's, not the radial direction
-        arm, s_arm, t_arm = _assign_arms(xy, c, np.asarray(arm_angles, float))
-        rx, ry = np.cos(np.asarray(arm_angles))[arm], np.sin(np.asarray(arm_angles))[arm]
-        okr = okr & (s_arm > 0)
+    arm, s_arm, t_arm, on = _on_arms(xy, c, arm_angles, cfg)
+    if on.any():   # on an arm the lane direction is the arm's, not the radial direction
+        ang = np.asarray(arm_angles, float)
+        rx, ry = np.where(on, np.cos(ang)[arm], rx), np.where(on, np.sin(ang)[arm], ry)
     proj = rx * lx + ry * ly
     keep = okr & okl
     # direction from the Doppler sign; unknown (class 2, d = 0) where the motion is across
@@ -203,13 +205,14 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     unknown = (np.abs(proj) < cfg.min_radial_cos) | (np.abs(dop) < cfg.min_doppler)
     if not cfg.keep_unknown_direction:
         keep &= ~unknown
-    cls = np.where(unknown, 2, np.where(dop * proj > 0, 0, 1))[keep].astype(np.int64)
-    if arm_mode:
-        vxy, vcls, cnt = _arm_voxels(xy[keep], cls, arm[keep], s_arm[keep], t_arm[keep],
-                                     ts[keep], cfg)
+    cls = np.where(unknown, 2, np.where(dop * proj > 0, 0, 1)).astype(np.int64)
+    a, b = keep & on, keep & ~on
+    va = _arm_voxels(xy[a], cls[a], arm[a], s_arm[a], t_arm[a], ts[a], cfg)
+    if arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0:
+        vb = _ray_voxels(xy[b], cls[b], c, ts[b], cfg)     # arm not found yet
     else:
-        vxy, vcls, cnt, _ = voxelise(xy[keep], cls, cfg.voxel_size, t=ts[keep],
-                                     gap=cfg.passage_gap)
+        vb = voxelise(xy[b], cls[b], cfg.voxel_size, t=ts[b], gap=cfg.passage_gap)[:3]
+    vxy, vcls, cnt = (np.concatenate([p, q]) for p, q in zip(va, vb))
     dcls = np.select([vcls == 1, vcls == 0], [1.0, -1.0], 0.0)
     n = len(vxy)
     z = np.zeros(n)
@@ -217,6 +220,35 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
                          dcls, cfg.weight_scale * cnt ** cfg.weight_power,
                          np.full(n, cfg.sigma_point), np.full(n, 1.0))
     return _drop_near_center(obs, c, cfg)
+
+
+def _on_arms(xy, c, arm_angles, cfg: PreprocessConfig):
+    """Nearest arm, s, t of every row and whether it lies on that arm: ahead of the center
+    and within ``arm_reach`` of its axis. Rows on no current arm are voxelised in square
+    voxels without the straight-run filter, so that an arm the chain has not found yet
+    keeps its data (aligned with a neighbouring arm they would look like crossing
+    traffic and be filtered out, and the arm could never be added)."""
+    n = len(xy)
+    if arm_angles is None or len(arm_angles) == 0 or cfg.voxel_length <= 0 or n == 0:
+        z = np.zeros(n)
+        return np.zeros(n, np.int64), z, z, np.zeros(n, bool)
+    arm, s, t = _assign_arms(xy, c, np.asarray(arm_angles, float))
+    return arm, s, t, (s > 0) & (np.abs(t) <= cfg.arm_reach)
+
+
+#: Rays every 10 deg: the frame of rows on no current arm (see :func:`_on_arms`).
+RAYS = np.radians(np.arange(-180.0, 180.0, 10.0))
+
+
+def _ray_voxels(xy, cls, c, stamp, cfg: PreprocessConfig, vec=None):
+    """Rows on no current arm: voxels aligned with the nearest of :data:`RAYS` from the
+    center, with the straight-run filter -- an unfound arm's traffic runs radially and
+    survives, isolated clutter and turning traffic do not."""
+    arm, s, t = _assign_arms(xy, c, RAYS)
+    ok = s > 0
+    sub = (lambda a: a[ok]) if not ok.all() else (lambda a: a)
+    return _arm_voxels(sub(xy), sub(cls), sub(arm), sub(s), sub(t), sub(stamp), cfg,
+                       None if vec is None else sub(vec))
 
 
 def _assign_arms(xy, c, angles):
@@ -294,17 +326,25 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
     c = np.asarray(center, float)
     xy, h, ts = dets.xy[m], dets.heading[m], dets.t[m]
     vec = np.stack([np.cos(h), np.sin(h)], axis=1)
-    if arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0:
+    arm, s_arm, t_arm, on = _on_arms(xy, c, arm_angles, cfg)
+    parts = []
+    if on.any():
         ang = np.asarray(arm_angles, float)
-        arm, s_arm, t_arm = _assign_arms(xy, c, ang)
-        ok = s_arm > 0
         cls = (vec[:, 0] * np.cos(ang)[arm] + vec[:, 1] * np.sin(ang)[arm] < 0).astype(np.int64)
-        vxy, _, cnt, sv = _arm_voxels(xy[ok], cls[ok], arm[ok], s_arm[ok], t_arm[ok], ts[ok],
-                                      cfg, vec[ok])
-    else:
-        sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
-        vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
-                                   cfg.voxel_size, vec, t=ts, gap=cfg.passage_gap)
+        vxy, _, cnt, sv = _arm_voxels(xy[on], cls[on], arm[on], s_arm[on], t_arm[on], ts[on],
+                                      cfg, vec[on])
+        parts.append((vxy, cnt, sv))
+    if (~on).any():
+        if on.any():   # arms known: the rest along rays from the center
+            rad = np.arctan2(xy[~on, 1] - c[1], xy[~on, 0] - c[0])
+            cls = (vec[~on, 0] * np.cos(rad) + vec[~on, 1] * np.sin(rad) < 0).astype(np.int64)
+            vxy, _, cnt, sv = _ray_voxels(xy[~on], cls, c, ts[~on], cfg, vec[~on])
+        else:
+            sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
+            vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
+                                       cfg.voxel_size, vec, t=ts, gap=cfg.passage_gap)
+        parts.append((vxy, cnt, sv))
+    vxy, cnt, sv = (np.concatenate(p) for p in zip(*parts))
     hx, hy, okh = _unit(sv[:, 0], sv[:, 1])
     d = _direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
     obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, okh, d,

@@ -95,6 +95,8 @@ class TopologyConfig:
     min_track_speed: float = 3.0         # [m/s] max speed below: static (false) track
     trim_turn_deg: float = 15.0          # straight run of a trajectory part (0: paper)
     min_center_dist: float = 0.0         # [m]
+    arm_reach: float = 18.0              # [m] radar/heading rows farther from every arm's
+                                         # axis keep square voxels (arm not found yet)
     recenter_threshold: float = 2.0      # [m] re-preprocess when the center moved more
     recenter_window: int = 2500          # ... checked during the first samples after new data
     # --- annealing ------------------------------------------------------------------
@@ -171,6 +173,7 @@ class TopologyConfig:
         need('min_part_length', 0 <= self.min_part_length <= 100, '[0, 100] m')
         need('trim_turn_deg', 0 <= self.trim_turn_deg <= 90, '[0, 90]')
         need('min_center_dist', 0 <= self.min_center_dist <= 100, '[0, 100] m')
+        need('arm_reach', 1 <= self.arm_reach <= 100, '[1, 100] m')
         need('recenter_threshold', 0 < self.recenter_threshold, '(0, inf) m')
         need('recenter_window', 0 <= self.recenter_window, '[0, inf)')
         need('t_start', 0 < self.t_start <= 1e4, '(0, 1e4]')

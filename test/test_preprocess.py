@@ -147,3 +147,26 @@ def test_empty_and_degenerate_inputs():
     assert initial_center(*seed_lines(empty, CFG)) is None
     one = Detections.make([[1.0, 2.0]], heading=0.0, track_id=0)
     assert len(preprocess(one, (0, 0), CFG)) == 0
+
+
+def _corridor_weight(obs, center, angle, reach=12.0):
+    """Observation weight within ``reach`` of the ray from ``center`` at ``angle``, beyond 10 m."""
+    v = np.stack([obs.x - center[0], obs.y - center[1]], axis=1)
+    s = v @ np.array([math.cos(angle), math.sin(angle)])
+    t = v @ np.array([-math.sin(angle), math.cos(angle)])
+    return float(obs.w[(s > 10.0) & (np.abs(t) < reach)].sum())
+
+
+def test_an_arm_the_chain_has_not_found_keeps_its_radar_and_heading_data():
+    """Rows on no current arm are voxelised along rays, not along a neighbouring arm, where
+    the straight-run filter used to drop them all: the chain could never add that arm."""
+    inter = easy_intersection(4, lanes=((2, 2),) * 4)
+    angles = [a.angle for a in inter.arms]
+    for mode, fn in (('raw', radar_observations), ('heading', heading_observations)):
+        dets = scene(inter, mode, seed=3)
+        full = fn(dets, inter.center, CFG, angles)
+        for k in range(len(angles)):
+            missing = fn(dets, inter.center, CFG, angles[:k] + angles[k + 1:])
+            w_full = _corridor_weight(full, inter.center, angles[k])
+            assert w_full > 0
+            assert _corridor_weight(missing, inter.center, angles[k]) > 0.5 * w_full, (mode, k)
