@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-__all__ = ['evaluate', 'aggregate', 'SUMMARY_KEYS', 'GATE_M', 'RESAMPLE_M', 'register',
+__all__ = ['evaluate', 'evaluate_files', 'aggregate', 'SUMMARY_KEYS', 'GATE_M', 'RESAMPLE_M', 'register',
            'format_metrics']
 
 GATE_M = 1.5
@@ -396,7 +396,8 @@ def _load(path):
         return {'__error__': f'cannot read {path}: {e}'}
 
 
-def _evaluate_files(est_path, gt_path) -> dict:
+def evaluate_files(est_path, gt_path) -> dict:
+    """Metrics of an estimate.json file against a gt.json file (unreadable files: a failed case)."""
     est, gt = _load(est_path), _load(gt_path)
     if '__error__' in gt:
         return _failed(gt['__error__'])
@@ -412,12 +413,12 @@ def _cmd(args) -> int:
         if not dirs:
             print(f'no case folders with gt.json under {root}')
             return 2
-        per_case = {p.name: _evaluate_files(p / 'estimate.json', p / 'gt.json') for p in dirs}
+        per_case = {p.name: evaluate_files(p / 'estimate.json', p / 'gt.json') for p in dirs}
         summary = aggregate(list(per_case.values()))
         out = {'summary': summary, 'cases': per_case}
         print(format_metrics(summary))
     elif args.estimate and args.gt:
-        out = _evaluate_files(args.estimate, args.gt)
+        out = evaluate_files(args.estimate, args.gt)
         print(format_metrics(out))
     else:
         print('evaluate: give ESTIMATE GT or --cases DIR')

@@ -280,7 +280,7 @@ def _demo(args) -> int:
     if gt.exists() and 'estimate' in summary.files:
         from .evaluate import evaluate_files
         m = evaluate_files(summary.files['estimate'], str(gt))
-        print('against ground truth: ' + ', '.join(f'{k} {v}' for k, v in m.items()
-                                                  if k in ('arms_ok', 'topology_ok', 'center_error_m',
-                                                           'lane_error_cm', 'lane_recall')))
+        keys = ('arm_correct', 'topology_correct', 'center_error_m', 'lane_error_cm', 'lane_recall',
+                'connectivity_recall')
+        print('against ground truth: ' + ', '.join(f'{k} {m.get(k)}' for k in keys))
     return 2 if summary.truncated else 0
