@@ -282,5 +282,6 @@ def _demo(args) -> int:
         m = evaluate_files(summary.files['estimate'], str(gt))
         keys = ('arm_correct', 'topology_correct', 'center_error_m', 'lane_error_cm', 'lane_recall',
                 'connectivity_recall')
-        print('against ground truth: ' + ', '.join(f'{k} {m.get(k)}' for k in keys))
+        fmt = (lambda v: f'{v:.3g}' if isinstance(v, float) else str(v))
+        print('against ground truth: ' + ', '.join(f'{k} {fmt(m.get(k))}' for k in keys))
     return 2 if summary.truncated else 0
