@@ -369,6 +369,29 @@ def log_prior(S, logPA, logPn, arm_const):
 
 # ----------------------------------------------------------------------------- likelihood
 
+@njit(cache=True, fastmath=True, inline='always')
+def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa):
+    """Observation ``i`` relative to an arm through (cx, cy) with direction (ux, uy):
+    along-arm ``s``, lateral ``t``, direction ``d`` (+1 entering) and angle energy ``e``.
+    With an orientation the direction is arm-local (entering iff <o, u_a> < 0) and
+    ``e = 2(1 - |cos|) / sigma^2`` (von Mises ~ angle^2); without, the Doppler class, and
+    for an unknown class (0) the side of the median decides."""
+    px = ox[i] - cx
+    py = oy[i] - cy
+    s = px * ux + py * uy
+    t = py * ux - px * uy
+    e = 0.0
+    if has_o[i]:
+        c = hx[i] * ux + hy[i] * uy
+        d = 1.0 if c < 0.0 else -1.0
+        e = isa[i] * 2.0 * (1.0 - abs(c))
+    else:
+        d = dcls[i]
+        if d == 0.0:
+            d = 1.0 if t * ts > 0.0 else -1.0
+    return s, t, d, e
+
+
 @njit(cache=True, fastmath=True)
 def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """Unnormalised density of every observation under its best lane of arm ``k``.
@@ -397,19 +420,7 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     inv_n_out = nout ** -P[P_LANE_NORM]
     lane_sum = P[P_LANE_SUM] > 0.0
     for i in range(ox.shape[0]):
-        px = ox[i] - cx
-        py = oy[i] - cy
-        s = px * ux + py * uy
-        t = py * ux - px * uy
-        e = 0.0
-        if has_o[i]:
-            c = hx[i] * ux + hy[i] * uy
-            d = 1.0 if c < 0.0 else -1.0
-            e = isa[i] * 2.0 * (1.0 - abs(c))     # von Mises: 2(1 - cos) ~ angle^2
-        else:
-            d = dcls[i]
-            if d == 0.0:              # unknown direction: the side of the median decides
-                d = 1.0 if t * ts > 0.0 else -1.0
+        s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
         if e >= cut:
             out[i] = 0.0
             continue
@@ -634,19 +645,7 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
     dd = np.empty(nobs)
     other = np.zeros(nobs)
     for i in range(nobs):
-        px = ox[i] - S[0]
-        py = oy[i] - S[1]
-        s = px * ux + py * uy
-        t = py * ux - px * uy
-        e = 0.0
-        if has_o[i]:
-            c = hx[i] * ux + hy[i] * uy
-            d = 1.0 if c < 0.0 else -1.0
-            e = isa[i] * 2.0 * (1.0 - abs(c))     # von Mises: 2(1 - cos) ~ angle^2
-        else:
-            d = dcls[i]
-            if d == 0.0:
-                d = 1.0 if t * ts > 0.0 else -1.0
+        s, t, d, e = arm_frame(i, S[0], S[1], ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
         dd[i] = d
         tl[i] = d * ts * t
         base[i] = e + (isp[i] * s * s if s < 0.0 else 0.0)

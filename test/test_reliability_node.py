@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import script, wait_for
+from test_ingest import Sink
 
 SEED = 3                  # simulated scenario of the valid stream (4 arms)
 RADAR = '/perception/radar/points'
@@ -407,18 +408,6 @@ def test_bad_parameters_at_run_time_are_refused_and_the_old_value_kept(probe, no
 T0 = 1_700_000_000.0
 
 
-class _Sink:
-    def __init__(self):
-        self.parts, self.resets = [], 0
-
-    def add(self, dets):
-        self.parts.append(dets)
-        return len(dets)
-
-    def reset(self):
-        self.resets += 1
-
-
 @pytest.fixture(scope='module')
 def btypes():
     from intersection_estimator.bagio import typestore
@@ -429,7 +418,7 @@ def btypes():
 def _ingest(btypes):
     from intersection_estimator import params as P
     from intersection_estimator.ingest import Ingest
-    return Ingest(P.defaults(), btypes), _Sink()
+    return Ingest(P.defaults(), btypes), Sink()
 
 
 def _objects(types, t, xy, ids=None):
