@@ -173,25 +173,26 @@ def move_shift(S, S2, P):
 
 
 @njit(cache=True)
-def move_gap(S, S2, P):
-    """Change the median gap of a random arm by U[-step, step] (symmetric)."""
+def _perturb_arm(S, S2, P, field, step, lo, hi):
+    """Change ``field`` of a random arm by U[-step, step] (symmetric); valid in [lo, hi]."""
     n = int(S[2])
     k = int(np.random.random() * n)
-    i = HDR + k * STRIDE + GAP
-    g = S[i] + (2.0 * np.random.random() - 1.0) * P[P_GAP_STEP] * _step(P)
-    S2[i] = g
-    return 0.0 <= g <= P[P_GAP_MAX], 0.0, k
+    i = HDR + k * STRIDE + field
+    v = S[i] + (2.0 * np.random.random() - 1.0) * step * _step(P)
+    S2[i] = v
+    return lo <= v <= hi, 0.0, k
+
+
+@njit(cache=True)
+def move_gap(S, S2, P):
+    """Change the median gap of a random arm (paper Algorithm 1)."""
+    return _perturb_arm(S, S2, P, GAP, P[P_GAP_STEP], 0.0, P[P_GAP_MAX])
 
 
 @njit(cache=True)
 def move_width(S, S2, P):
-    """Change the lane width of a random arm by U[-step, step] (symmetric, beyond paper)."""
-    n = int(S[2])
-    k = int(np.random.random() * n)
-    i = HDR + k * STRIDE + WID
-    w = S[i] + (2.0 * np.random.random() - 1.0) * P[P_W_STEP] * _step(P)
-    S2[i] = w
-    return P[P_W_MIN] <= w <= P[P_W_MAX], 0.0, k
+    """Change the lane width of a random arm (beyond the paper)."""
+    return _perturb_arm(S, S2, P, WID, P[P_W_STEP], P[P_W_MIN], P[P_W_MAX])
 
 
 @njit(cache=True)
