@@ -1,0 +1,130 @@
+#!/usr/bin/env python3
+"""Measure the node live: tick time against its budget, and how soon a full estimate comes.
+
+Starts ``intersection_estimator_node`` (its console script, default parameter file) in its
+own process, plays a bag into it with ``intersection-estimator replay --live`` from a second
+process, and listens to ``/diagnostics`` and ``~/topology`` from this one. Prints the tick
+time (median / p95 / max over the run, from the node's own diagnostics) against
+``budget_ms``, and the bag time and estimation time until the first topology with the
+ground truth's number of arms. DDS stays on this host with its own domain id.
+
+    .venv/bin/python scripts/measure_node.py bags/tracked [--rate 1.0] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+def _env() -> dict:
+    home = tempfile.mkdtemp(prefix='ie_measure_')
+    return dict(os.environ, ROS_DOMAIN_ID=str(120 + os.getpid() % 100), ROS_HOME=home,
+                ROS_LOG_DIR=os.path.join(home, 'log'), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                FASTRTPS_DEFAULT_PROFILES_FILE=str(ROOT / 'config' / 'fastdds_localhost.xml'),
+                AMENT_PREFIX_PATH=os.environ.get('AMENT_PREFIX_PATH') or sys.prefix)
+
+
+def _listen(args, env):
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from intersection_estimator_msgs.msg import Topology
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from intersection_estimator.estimate_io import read_gt
+
+    gt_path = Path(str(args.bag).rstrip('/') + '.gt.json')
+    n_arms = len(read_gt(gt_path).intersection.arms) if gt_path.exists() else None
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node('ie_measure', context=ctx)
+    diags, topos = [], []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    node.create_subscription(DiagnosticArray, '/diagnostics',
+                             lambda m: diags.append((time.monotonic(), m)), 50)
+    node.create_subscription(Topology, '/intersection_estimator/topology',
+                             lambda m: topos.append((time.monotonic(), m)), latched)
+    ex = rclpy.executors.SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    procs = []
+    try:
+        procs.append(subprocess.Popen([str(BIN / 'intersection_estimator_node'), '--ros-args',
+                                       '--params-file', str(ROOT / 'config' / 'intersection_estimator.yaml')],
+                                      env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        end = time.monotonic() + 30
+        while not topos and time.monotonic() < end:      # bounded wait for discovery
+            ex.spin_once(timeout_sec=0.05)
+        if not topos:
+            sys.exit('measure_node: the node published no topology within 30 s')
+        t_play = time.monotonic()
+        player = subprocess.Popen([str(BIN / 'intersection-estimator'), 'replay', '--live',
+                                   '--rate', str(args.rate), str(args.bag)], env=env,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        procs.append(player)
+        while player.poll() is None:
+            ex.spin_once(timeout_sec=0.05)
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+                p.wait(10)
+        node.destroy_node()
+        ctx.try_shutdown()
+    return diags, topos, t_play, n_arms
+
+
+def _summary(diags, topos, t_play, n_arms, rate) -> dict:
+    vals = [(t, {kv.key: kv.value for kv in d.status[0].values}) for t, d in diags if d.status]
+    vals = [(t, v) for t, v in vals if 'tick_ms_p95' in v and v.get('state') != 'NO_DATA']
+    first = next((t for t, m in topos if m.state != m.NO_DATA and n_arms is not None
+                  and len(m.arms) == n_arms), None)
+    last = vals[-1][1] if vals else {}
+    out = {'budget_ms': float(last.get('budget_ms', 'nan')),
+           'tick_ms_median': float(last.get('tick_ms_median', 'nan')),
+           'tick_ms_p95': float(last.get('tick_ms_p95', 'nan')),
+           'tick_ms_p95_max': max((float(v['tick_ms_p95']) for _, v in vals), default=float('nan')),
+           'ticks_with_data': len(vals), 'true_arms': n_arms, 'right_arm_count': first is not None}
+    if first is not None:
+        out['bag_s_to_right_arm_count'] = round((first - t_play) * rate, 2)
+        out['estimation_ms_to_right_arm_count'] = round(sum(
+            float(v.get('topology_ms', 0.0)) + float(v.get('lanes_ms', 0.0))
+            for t, v in vals if t <= first), 1)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('bag')
+    ap.add_argument('--rate', type=float, default=1.0)
+    ap.add_argument('--json')
+    args = ap.parse_args(argv)
+    if not Path(args.bag).exists():
+        print(f'measure_node: no such bag: {args.bag}', file=sys.stderr)
+        return 1
+    env = _env()
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_HOME', 'ROS_LOG_DIR',
+                                            'ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                            'FASTRTPS_DEFAULT_PROFILES_FILE')})
+    diags, topos, t_play, n_arms = _listen(args, env)
+    out = _summary(diags, topos, t_play, n_arms, args.rate)
+    print(json.dumps(out, indent=1))
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
