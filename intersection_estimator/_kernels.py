@@ -532,7 +532,7 @@ def rescore_arm(C, n, k, col, has_col, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
     return delta, cnt
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)   # inputs are served meanwhile (node.py)
 def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
               ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats):
     """Metropolis-Hastings with simulated annealing (paper §II, Algorithm 1).
@@ -618,7 +618,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
 
 # ----------------------------------------------------------------------------- arm refit
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths):
     """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed.
 

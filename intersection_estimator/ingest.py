@@ -280,8 +280,10 @@ def _plausible(a: EgoPose, b: EgoPose) -> bool:
     return dt >= -1.0 and math.hypot(b.x - a.x, b.y - a.y) <= MAX_EGO_SPEED * min(abs(dt), EGO_DT_MAX) + EGO_SLACK
 
 
-def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None):
-    """One estimation tick as node and replay both run it: next intersection, then estimate.
+def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None, budget_s: float | None = None,
+         lanes_reserve_s: float = 0.0):
+    """One estimation tick as node and replay both run it: next intersection, then estimate
+    (``budget_s``, ``lanes_reserve_s``: see :meth:`~.pipeline.OnlineEstimator.tick`).
 
     Returns the :class:`~.pipeline.EstimateResult`, or None before the first message.
     """
@@ -294,4 +296,5 @@ def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None):
             log('ego passed the intersection: starting on the next one')
         estimator.reset()
         ingest.forget_before(now)
-    return estimator.tick(now, wall_budget=wall_budget)
+    return estimator.tick(now, wall_budget=wall_budget, budget_s=budget_s,
+                          lanes_reserve_s=lanes_reserve_s)

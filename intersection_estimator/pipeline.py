@@ -204,25 +204,40 @@ class OnlineEstimator:
             self._approached = True
         return self._approached and along > self.config.reset_distance
 
-    def tick(self, now: float, *, wall_budget: bool = False) -> EstimateResult:
-        """Spend one tick's budget on the current window and return the best estimate."""
+    def tick(self, now: float, *, wall_budget: bool = False, budget_s: float | None = None,
+             lanes_reserve_s: float = 0.0) -> EstimateResult:
+        """Spend one tick's budget on the current window and return the best estimate.
+
+        In wall mode the budget (``budget_s``, default ``config.budget_s``) covers the whole
+        tick -- preprocessing, chain restarts and lane initialisation included: the topology
+        chain runs until ``1 - lane_share`` of it has passed, the lane course until its end
+        (each gets at least ``MIN_SHARE`` of it, so that data growing faster than the
+        machine cannot starve the sampler). A tick that re-estimates the lane course ends
+        ``lanes_reserve_s`` earlier: the caller's time to publish the new lanelets.
+        """
         cfg = self.config
         t0 = time.perf_counter()
+        total = cfg.budget_s if budget_s is None else budget_s
+        deadline = t0 + total
+        topo_end = t0 + total * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)
         with self._lock:
             dirty, self._dirty = self._dirty, False
             dets = self._window(now) if dirty else Detections.concat(self._parts)
-        budget = ({'time_budget_s': cfg.budget_s * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)}
-                  if wall_budget else {'n_samples': cfg.topology_samples})
+        restart = False
         if dirty:
             self._topo.set_observations(dets)
             self._lane_key = None if self._lane_key is None else ('stale',) + self._lane_key[1:]
-            if len(dets) >= cfg.restart_growth * self._restart_n:
-                budget = self._restart(dets, budget)
-        if budget:
-            self._topo.run(**budget)
+            restart = len(dets) >= cfg.restart_growth * self._restart_n
+        if restart:
+            self._restart(dets, topo_end if wall_budget else None, total)
+        elif wall_budget:
+            self._topo.run(time_budget_s=_left(topo_end, total))
+        else:
+            self._topo.run(n_samples=cfg.topology_samples)
         t1 = time.perf_counter()
         best = self._topo.best
-        lanelets = self._tick_lanes(best, dets, now, wall_budget, cfg.budget_s - (t1 - t0))
+        lanelets = self._tick_lanes(best, dets, now, deadline - lanes_reserve_s if wall_budget else None,
+                                    total)
         t2 = time.perf_counter()
         self.result = EstimateResult(
             best, lanelets, {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3},
@@ -230,30 +245,35 @@ class OnlineEstimator:
             self._topo.best_log_posterior, self._topo.state, len(dets), self._lanes_updated)
         return self.result
 
-    def _restart(self, dets: Detections, budget: dict) -> None:
+    def _restart(self, dets: Detections, topo_end: float | None, total: float) -> None:
         """Race a fresh chain (data-driven initialisation) against the warm one.
 
         Early on, little data can lead the warm chain into a model (e.g. a straight road
         far from the real center) that its local moves (paper Alg. 1) cannot leave when
         the rest of the traffic arrives. Whenever the window has grown by
         ``restart_growth`` since the last race, both chains get half of this tick's
-        budget and the one with the higher posterior goes on. Returns what is left.
+        topology budget (samples, or the wall time left until ``topo_end``) and the one
+        with the higher posterior goes on.
         """
         self._restart_n = len(dets)
         self._races += 1
-        half = {k: (v // 2 if k == 'n_samples' else v / 2) for k, v in budget.items()}
         rng = np.random.default_rng(np.random.SeedSequence([self._seed, self._resets, self._races]))
         fresh = TopologyEstimator(self.config.topology, rng)
         fresh.set_observations(dets)
-        fresh.run(**half)
-        self._topo.run(**half)
+        if topo_end is None:
+            half = self.config.topology_samples // 2
+            fresh.run(n_samples=half)
+            self._topo.run(n_samples=half)
+        else:
+            fresh.run(time_budget_s=0.5 * _left(topo_end, total))
+            self._topo.run(time_budget_s=_left(topo_end, 0.5 * total))
         if _prefers(fresh, self._topo):
             self._topo = fresh
-        return None
 
-    def _tick_lanes(self, best, dets, now, wall_budget, remaining_s) -> list[Lanelet]:
+    def _tick_lanes(self, best, dets, now, deadline, total) -> list[Lanelet]:
         """Lane course (§III) at most every ``lane_period`` of stamp time, and at once when
-        the topology it rests on changed; in between the last lanelets stand."""
+        the topology it rests on changed; in between the last lanelets stand. With a
+        ``deadline`` (wall mode) it runs until then, initialisation included."""
         cfg = self.config
         self._lanes_updated = True
         if best is None:
@@ -269,12 +289,20 @@ class OnlineEstimator:
         if self._lane_key != key:
             self._lanes.initialise(best, dets)
             self._lane_key = key
-        if wall_budget:
-            if remaining_s > 0:
-                self._lanes.run(time_budget_s=remaining_s)
+        if deadline is not None:
+            self._lanes.run(time_budget_s=_left(deadline, total))
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
         return self._lanes.lanelets
+
+
+#: Least share of the tick budget a step gets even when the tick is already late.
+MIN_SHARE = 0.05
+
+
+def _left(end: float, total: float) -> float:
+    """Seconds until ``end``, at least ``MIN_SHARE`` of ``total``."""
+    return max(end - time.perf_counter(), MIN_SHARE * total)
 
 
 def _prefers(a: TopologyEstimator, b: TopologyEstimator) -> bool:

@@ -86,16 +86,24 @@ def _listen(args, env):
     return diags, topos, t_play, n_arms
 
 
+def _pct(x, q):
+    x = sorted(x)
+    return x[min(int(q * len(x)), len(x) - 1)] if x else float('nan')
+
+
 def _summary(diags, topos, t_play, n_arms, rate) -> dict:
     vals = [(t, {kv.key: kv.value for kv in d.status[0].values}) for t, d in diags if d.status]
     vals = [(t, v) for t, v in vals if 'tick_ms_p95' in v and v.get('state') != 'NO_DATA']
     first = next((t for t, m in topos if m.state != m.NO_DATA and n_arms is not None
                   and len(m.arms) == n_arms), None)
     last = vals[-1][1] if vals else {}
+    est = [float(v.get('topology_ms', 0)) + float(v.get('lanes_ms', 0)) for _, v in vals]
     out = {'budget_ms': float(last.get('budget_ms', 'nan')),
            'tick_ms_median': float(last.get('tick_ms_median', 'nan')),
            'tick_ms_p95': float(last.get('tick_ms_p95', 'nan')),
            'tick_ms_p95_max': max((float(v['tick_ms_p95']) for _, v in vals), default=float('nan')),
+           'overhead_ms_last': float(last.get('overhead_ms', 'nan')),
+           'estimation_ms_median': _pct(est, 0.5), 'estimation_ms_p95': _pct(est, 0.95),
            'ticks_with_data': len(vals), 'true_arms': n_arms, 'right_arm_count': first is not None}
     if first is not None:
         out['bag_s_to_right_arm_count'] = round((first - t_play) * rate, 2)

@@ -37,7 +37,7 @@ def _copy_best(P, ref, merged, bP, bref, bmerged):
     bmerged[:] = merged
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)   # inputs are served meanwhile (node.py)
 def run_chain(n, k0, seed, prm, P, axis, ref, home, users, nusers, st_normal, st_ll,
               pair_a, pair_b, pair_merged, prev_st, next_st, adep_ptr, adep_idx, ang, delta,
               mu, C, Q, win_lo, win_hi, pdep_ptr, pdep_idx, term, best_P, best_ref, best_merged):
