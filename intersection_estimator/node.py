@@ -86,7 +86,6 @@ class IntersectionEstimatorNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.log = RateLimitedLog(self.get_logger(), period_s=5.0)
-        self.get_logger().info(f'estimator kernels ready in {warmup():.1f} s')
         self.estimator = OnlineEstimator(P.pipeline_config(self.values), seed=self.values['seed'])
         self.ingest = Ingest(self.values, RclpyTypes())
         self.types = RclpyTypes()
@@ -108,15 +107,20 @@ class IntersectionEstimatorNode(Node):
         for role, topic, msg_type in self.ingest.subscriptions():
             self.create_subscription(msg_type, topic, self._callback(role), INPUT_QOS)
             self.get_logger().info(f'listening to {topic} ({role})')
-        gc.collect()
-        gc.freeze()     # start-up objects (types, kernels) out of the collector: shorter pauses
+        header = Header(frame_id=self.values['fixed_frame'], stamp=self.get_clock().now().to_msg())
+        self.pub_topology.publish(topology_msg(self.types, header, None, 0, float('-inf'), 0, 'NO_DATA'))
         self._wake, self._stop = threading.Event(), threading.Event()
         self._worker = threading.Thread(target=self._estimation_loop, name='estimator', daemon=True)
         self._worker.start()
         self.timer = self.create_timer(self.values['timer_period'], self._wake.set)
 
     def _estimation_loop(self) -> None:
-        """One tick per timer period (a late tick skips the periods it missed)."""
+        """Compile (or load) the kernels, then one tick per timer period (a late tick skips
+        the periods it missed). The node is on the graph meanwhile: inputs are kept, the
+        latched topology says NO_DATA."""
+        self.get_logger().info(f'estimator kernels ready in {warmup():.1f} s')
+        gc.collect()
+        gc.freeze()     # start-up objects (types, kernels) out of the collector: shorter pauses
         while not self._stop.is_set():
             if self._wake.wait(0.5) and not self._stop.is_set():
                 self._wake.clear()
