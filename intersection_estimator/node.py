@@ -16,6 +16,7 @@ a 150 ms budget, the process at 60 % CPU). Here the executor only runs short cal
 
 from __future__ import annotations
 
+from collections import deque
 import gc
 import sys
 import threading
@@ -91,7 +92,9 @@ class IntersectionEstimatorNode(Node):
         self.types = RclpyTypes()
         self._marker_keys: set = set()
         self._tick_ms: list[float] = []
-        self._overhead_ms = {False: 0.0, True: 0.0}   # EMA per tick kind [ms], see _tick
+        # recent time [ms] ticks spent besides estimating, per kind (see _tick): the budget
+        # keeps the median of plain ticks and the worst of recent lane-publishing ticks back
+        self._overhead_ms = {False: deque(maxlen=20), True: deque(maxlen=5)}
         self._prev_samples = 0
 
         from intersection_estimator_msgs.msg import LaneletArray, Topology
@@ -149,7 +152,8 @@ class IntersectionEstimatorNode(Node):
         t0 = time.perf_counter()
         try:
             samples = self.estimator.result.topology_samples
-            base, lanes = self._overhead_ms[False], self._overhead_ms[True]
+            base = float(np.median(self._overhead_ms[False] or [0.0]))
+            lanes = max(self._overhead_ms[True], default=0.0)
             result = tick(self.ingest, self.estimator, wall_budget=True, log=self.get_logger().info,
                           budget_s=max(self.values['budget_ms'] - base, 0.5 * self.values['budget_ms']) / 1e3,
                           lanes_reserve_s=min(max(lanes - base, 0.0), 0.3 * self.values['budget_ms']) / 1e3)
@@ -181,8 +185,7 @@ class IntersectionEstimatorNode(Node):
         self._tick_ms = self._tick_ms[-100:]
         if result is not None and result.timing_ms:   # what ticks spend besides estimating:
             over = max(self._tick_ms[-1] - result.timing_ms.get('total', 0.0), 0.0)   # messages,
-            k = bool(result.lanes_updated)                      # markers when the lanes changed
-            self._overhead_ms[k] = 0.7 * self._overhead_ms[k] + 0.3 * over
+            self._overhead_ms[bool(result.lanes_updated)].append(over)   # markers when lanes changed
         self.pub_diag.publish(self._diagnostics(header, result))
 
     def _diagnostics(self, header, result) -> DiagnosticArray:
@@ -192,8 +195,9 @@ class IntersectionEstimatorNode(Node):
         kv = {'state': state, 'observations': self.estimator.n_observations,
               'tick_ms_median': float(np.median(ticks)), 'tick_ms_p95': float(np.percentile(ticks, 95)),
               'tick_ms_last': float(ticks[-1]), 'budget_ms': budget,
-              'budget_use': float(np.median(ticks)) / budget, 'overhead_ms': self._overhead_ms[False],
-              'lanes_publish_ms': self._overhead_ms[True]}
+              'budget_use': float(np.median(ticks)) / budget,
+              'overhead_ms': float(np.median(self._overhead_ms[False] or [0.0])),
+              'lanes_publish_ms': max(self._overhead_ms[True], default=0.0)}
         if result is not None:
             drawn = result.topology_samples - self._prev_samples
             self._prev_samples = result.topology_samples
