@@ -147,14 +147,40 @@ def _arm_lanelet(inter, a, direction, k, stop, length, spacing) -> Lanelet:
                    center=center, lane_index=k)
 
 
-def _bezier(p0, d0, p3, d3, spacing):
-    """Cubic Bezier from p0 (heading d0) to p3 (heading d3): points, tangents, params."""
+#: Tightest turn radius of a connector center line [m] (passenger cars turn >= ~5 m at
+#: the kerb); the circular-arc handles below keep to it except for sharp turns between arms
+#: whose lane ends are far from symmetric, which get asymmetric handles.
+MIN_TURN_RADIUS = 4.0
+
+
+def _max_curvature(p0, p1, p2, p3, n=200) -> float:
+    """Largest curvature of a cubic Bezier (analytic, on ``n`` parameter values)."""
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    v = 3 * (1 - t) ** 2 * (p1 - p0) + 6 * (1 - t) * t * (p2 - p1) + 3 * t ** 2 * (p3 - p2)
+    a = 6 * (1 - t) * (p2 - 2 * p1 + p0) + 6 * t * (p3 - 2 * p2 + p1)
+    cross = np.abs(v[:, 0] * a[:, 1] - v[:, 1] * a[:, 0])
+    return float((cross / np.maximum(np.linalg.norm(v, axis=1), 1e-9) ** 3).max())
+
+
+def _handles(p0, d0, p3, d3):
+    """Control points p1, p2: handles of a circular arc through the turn angle (chord/3
+    straight, ~0.39 at 90 deg); if that turns tighter than MIN_TURN_RADIUS, the pair of
+    handle lengths (0.1-1 chord each) with the gentlest turn."""
     chord = float(np.linalg.norm(p3 - p0))
     phi = math.acos(float(np.clip(np.dot(d0, d3), -1.0, 1.0)))
-    # handle of a circular arc through the turn angle phi: chord/3 straight, ~0.39 at 90 deg
     ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
     h = chord * min(ratio, 0.5)
     p1, p2 = p0 + h * d0, p3 - h * d3
+    if _max_curvature(p0, p1, p2, p3) * MIN_TURN_RADIUS <= 1.0:
+        return p1, p2
+    grid = np.linspace(0.1, 1.0, 10) * chord
+    _, h0, h3 = min((_max_curvature(p0, p0 + a * d0, p3 - b * d3, p3), a, b) for a in grid for b in grid)
+    return p0 + h0 * d0, p3 - h3 * d3
+
+
+def _bezier(p0, d0, p3, d3, spacing):
+    """Cubic Bezier from p0 (heading d0) to p3 (heading d3): points, tangents, params."""
+    p1, p2 = _handles(p0, d0, p3, d3)
     fine = np.linspace(0.0, 1.0, 400)[:, None]
     pts = ((1 - fine) ** 3 * p0 + 3 * (1 - fine) ** 2 * fine * p1
            + 3 * (1 - fine) * fine ** 2 * p2 + fine ** 3 * p3)
