@@ -183,8 +183,8 @@ class Ingest:
         dets = to_detections(msg, self.ego, self.opts)
         bad = getattr(dets, 'non_finite', 0)
         if bad:
-            self.drop('non_finite', f'{role}: cleaned {bad} non-finite point(s)/object(s)')
-            self.dropped['non_finite'] += bad - 1
+            self.dropped['non_finite'] += bad
+            self.warn('non_finite', f'{role}: cleaned {bad} non-finite point(s)/object(s)')
         return self._clean(role, dets)
 
     def _clean(self, role: str, dets):

@@ -152,8 +152,7 @@ class IntersectionEstimatorNode(Node):
         t0 = time.perf_counter()
         try:
             samples = self.estimator.result.topology_samples
-            base = float(np.median(self._overhead_ms[False] or [0.0]))
-            lanes = max(self._overhead_ms[True], default=0.0)
+            base, lanes = self._overheads()
             result = tick(self.ingest, self.estimator, wall_budget=True, log=self.get_logger().info,
                           budget_s=max(self.values['budget_ms'] - base, 0.5 * self.values['budget_ms']) / 1e3,
                           lanes_reserve_s=min(max(lanes - base, 0.0), 0.3 * self.values['budget_ms']) / 1e3)
@@ -188,6 +187,12 @@ class IntersectionEstimatorNode(Node):
             self._overhead_ms[bool(result.lanes_updated)].append(over)   # markers when lanes changed
         self.pub_diag.publish(self._diagnostics(header, result))
 
+    def _overheads(self) -> tuple[float, float]:
+        """[ms] the median overhead of recent plain ticks, the worst of recent ticks that
+        published new lanelets and markers."""
+        return (float(np.median(self._overhead_ms[False] or [0.0])),
+                max(self._overhead_ms[True], default=0.0))
+
     def _diagnostics(self, header, result) -> DiagnosticArray:
         budget = self.values['budget_ms']
         ticks = np.asarray(self._tick_ms)
@@ -196,8 +201,7 @@ class IntersectionEstimatorNode(Node):
               'tick_ms_median': float(np.median(ticks)), 'tick_ms_p95': float(np.percentile(ticks, 95)),
               'tick_ms_last': float(ticks[-1]), 'budget_ms': budget,
               'budget_use': float(np.median(ticks)) / budget,
-              'overhead_ms': float(np.median(self._overhead_ms[False] or [0.0])),
-              'lanes_publish_ms': max(self._overhead_ms[True], default=0.0)}
+              **dict(zip(('overhead_ms', 'lanes_publish_ms'), self._overheads()))}
         if result is not None:
             drawn = result.topology_samples - self._prev_samples
             self._prev_samples = result.topology_samples

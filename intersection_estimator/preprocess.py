@@ -208,7 +208,7 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     cls = np.where(unknown, 2, np.where(dop * proj > 0, 0, 1)).astype(np.int64)
     a, b = keep & on, keep & ~on
     va = _arm_voxels(xy[a], cls[a], arm[a], s_arm[a], t_arm[a], ts[a], cfg)
-    if arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0:
+    if _arms_known(arm_angles, cfg):
         vb = _ray_voxels(xy[b], cls[b], c, ts[b], cfg)     # arm not found yet
     else:
         vb = voxelise(xy[b], cls[b], cfg.voxel_size, t=ts[b], gap=cfg.passage_gap)[:3]
@@ -222,14 +222,19 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     return _drop_near_center(obs, c, cfg)
 
 
+def _arms_known(arm_angles, cfg: PreprocessConfig) -> bool:
+    """Are voxels aligned with arms (arms given and arm-aligned voxels configured)?"""
+    return arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0
+
+
 def _on_arms(xy, c, arm_angles, cfg: PreprocessConfig):
     """Nearest arm, s, t of every row and whether it lies on that arm: ahead of the center
-    and within ``arm_reach`` of its axis. Rows on no current arm are voxelised in square
-    voxels without the straight-run filter, so that an arm the chain has not found yet
+    and within ``arm_reach`` of its axis. Rows on no current arm are voxelised along rays
+    from the center (:func:`_ray_voxels`), so that an arm the chain has not found yet
     keeps its data (aligned with a neighbouring arm they would look like crossing
     traffic and be filtered out, and the arm could never be added)."""
     n = len(xy)
-    if arm_angles is None or len(arm_angles) == 0 or cfg.voxel_length <= 0 or n == 0:
+    if not _arms_known(arm_angles, cfg) or n == 0:
         z = np.zeros(n)
         return np.zeros(n, np.int64), z, z, np.zeros(n, bool)
     arm, s, t = _assign_arms(xy, c, np.asarray(arm_angles, float))
@@ -246,9 +251,8 @@ def _ray_voxels(xy, cls, c, stamp, cfg: PreprocessConfig, vec=None):
     survives, isolated clutter and turning traffic do not."""
     arm, s, t = _assign_arms(xy, c, RAYS)
     ok = s > 0
-    sub = (lambda a: a[ok]) if not ok.all() else (lambda a: a)
-    return _arm_voxels(sub(xy), sub(cls), sub(arm), sub(s), sub(t), sub(stamp), cfg,
-                       None if vec is None else sub(vec))
+    return _arm_voxels(xy[ok], cls[ok], arm[ok], s[ok], t[ok], stamp[ok], cfg,
+                       None if vec is None else vec[ok])
 
 
 def _assign_arms(xy, c, angles):

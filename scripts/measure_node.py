@@ -97,7 +97,7 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
     first = next((t for t, m in topos if m.state != m.NO_DATA and n_arms is not None
                   and len(m.arms) == n_arms), None)
     last = vals[-1][1] if vals else {}
-    est = [float(v.get('topology_ms', 0)) + float(v.get('lanes_ms', 0)) for _, v in vals]
+    est = [float(v.get('topology_ms', 0.0)) + float(v.get('lanes_ms', 0.0)) for _, v in vals]
     out = {'budget_ms': float(last.get('budget_ms', 'nan')),
            'tick_ms_median': float(last.get('tick_ms_median', 'nan')),
            'tick_ms_p95': float(last.get('tick_ms_p95', 'nan')),
@@ -108,8 +108,7 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
     if first is not None:
         out['bag_s_to_right_arm_count'] = round((first - t_play) * rate, 2)
         out['estimation_ms_to_right_arm_count'] = round(sum(
-            float(v.get('topology_ms', 0.0)) + float(v.get('lanes_ms', 0.0))
-            for t, v in vals if t <= first), 1)
+            e for (t, _), e in zip(vals, est) if t <= first), 1)
     return out
 
 
