@@ -155,7 +155,7 @@ class IntersectionEstimatorNode(Node):
             base, lanes = self._overheads()
             result = tick(self.ingest, self.estimator, wall_budget=True, log=self.get_logger().info,
                           budget_s=max(self.values['budget_ms'] - base, 0.5 * self.values['budget_ms']) / 1e3,
-                          lanes_reserve_s=min(max(lanes - base, 0.0), 0.3 * self.values['budget_ms']) / 1e3)
+                          lanes_reserve_s=min(max(lanes - base, 0.0), 0.5 * self.values['budget_ms']) / 1e3)
             if result is not None and result.topology_samples < samples:
                 self._prev_samples = 0
             self._publish(result, t0)
