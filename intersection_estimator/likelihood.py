@@ -41,7 +41,7 @@ from . import _kernels as K
 
 __all__ = ['ObservationSet', 'log_likelihood', 'log_likelihood_reference']
 
-FIELDS = ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w', 'sigma', 'sigma_ang')
+FIELDS = ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w', 'sigma', 'sigma_ang', 'passages')
 
 
 @dataclass
@@ -54,7 +54,9 @@ class ObservationSet:
     sight -- the side of the arm's median then decides); w: weight (voxel count or 1 per trajectory part);
     sigma: orthogonal-distance sigma [m] (a trajectory mean is far more precise than a
     single detection); sigma_ang: angle sigma [rad] (heading of a track vs. a local
-    principal direction of radar points).
+    principal direction of radar points); passages: the vehicle passages the observation
+    stands for (1 per trajectory part; a voxel's detections per passage; default ``w``),
+    the evidence unit of ``TopologyConfig.min_arm_support``.
     """
 
     x: np.ndarray
@@ -66,6 +68,11 @@ class ObservationSet:
     w: np.ndarray
     sigma: np.ndarray
     sigma_ang: np.ndarray
+    passages: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.passages is None:
+            self.passages = np.array(self.w, dtype=np.float64, copy=True)
 
     def __len__(self) -> int:
         return len(self.x)
@@ -73,7 +80,7 @@ class ObservationSet:
     @classmethod
     def empty(cls) -> 'ObservationSet':
         z = np.zeros(0)
-        return cls(z, z, z, z, np.zeros(0, np.bool_), z, z, z, z)
+        return cls(z, z, z, z, np.zeros(0, np.bool_), z, z, z, z, z)
 
     @classmethod
     def concat(cls, parts) -> 'ObservationSet':

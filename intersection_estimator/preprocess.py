@@ -146,7 +146,7 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
                          np.full(len(o), cfg.sigma_track),
-                         np.full(len(o), math.radians(cfg.sigma_angle_deg)))
+                         np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
     return _drop_near_center(obs, c, cfg)
 
 
@@ -218,7 +218,7 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     z = np.zeros(n)
     obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), z, z.copy(), np.zeros(n, np.bool_),
                          dcls, cfg.weight_scale * cnt ** cfg.weight_power,
-                         np.full(n, cfg.sigma_point), np.full(n, 1.0))
+                         np.full(n, cfg.sigma_point), np.full(n, 1.0), cnt)
     return _drop_near_center(obs, c, cfg)
 
 
@@ -354,7 +354,7 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
     obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, okh, d,
                          cfg.weight_scale * cnt ** cfg.weight_power,
                          np.full(len(vxy), cfg.sigma_point),
-                         np.full(len(vxy), math.radians(cfg.sigma_angle_deg)))
+                         np.full(len(vxy), math.radians(cfg.sigma_angle_deg)), cnt)
     return _drop_near_center(obs, c, cfg)
 
 

@@ -106,6 +106,30 @@ def test_descent_repairs_a_lane_count_and_never_lowers_the_posterior(field, d):
     assert same_topology(gt, est.best), est.best
 
 
+def test_an_arm_explaining_fewer_passages_than_min_arm_support_is_not_reported():
+    """One radial false track makes an arm pay for its prior (clutter floor); the
+    reported estimate leaves it out, and its log posterior is that of what it reports."""
+    import copy
+    from intersection_estimator.model import Arm
+    from intersection_estimator.moves import pack_state
+    gt = EASY[1]
+    u = np.array([math.cos(math.radians(-40.0)), math.sin(math.radians(-40.0))])
+    xy = gt.center + np.outer(np.linspace(12.0, 40.0, 30), u) + np.array([-u[1], u[0]]) * 1.75
+    stray = Detections.make(xy, np.arange(30) * 0.1, heading=math.atan2(-u[1], -u[0]),
+                            track_id=999, speed=8.0)
+    dets = Detections.concat([scene(gt, 'tracked', seed=1), stray])
+    extra = copy.deepcopy(gt)
+    extra.arms.append(Arm(angle=math.radians(-40.0), gap=0.0, lanes_in=1, lanes_out=1,
+                          lane_width=3.5))
+    for support, n_arms in ((2.5, len(gt.arms)), (0.0, len(gt.arms) + 1)):
+        est = TopologyEstimator(TopologyConfig(min_arm_support=support), seed=0)
+        est.set_observations(dets)
+        est._chain.best_S[:] = pack_state(extra)
+        est._chain.best_lpost = est.log_posterior(extra)
+        assert len(est.best.arms) == n_arms
+        assert est.best_log_posterior == pytest.approx(est.log_posterior(est.best))
+
+
 def test_descent_off_draws_nothing_extra():
     gt = EASY[1]
     dets = scene(gt, 'tracked', seed=1)
