@@ -619,8 +619,10 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
 # ----------------------------------------------------------------------------- arm refit
 
 @njit(cache=True, nogil=True)
-def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths):
-    """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed.
+def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths,
+              fixed_counts=False):
+    """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed
+    (with ``fixed_counts``: best gap and width for the lane counts in ``S``).
 
     Deterministic coordinate ascent on the posterior (initialisation aid, beyond the
     paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
@@ -681,7 +683,12 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                 dsel = 1.0 if side == 0 else -1.0
                 sbest = -np.inf
                 sn = lo
-                for nl in range(lo, hi + 1):
+                n_lo = lo
+                n_hi = hi
+                if fixed_counts:
+                    n_lo = int(S[i0 + NIN]) if side == 0 else int(S[i0 + NOUT])
+                    n_hi = n_lo
+                for nl in range(n_lo, n_hi + 1):
                     inv = float(nl) ** -beta
                     ll = logPn[nl]
                     for r in range(nrel):
