@@ -665,6 +665,13 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
         if base[i] < cut and abs(tl[i]) < reach + math.sqrt(cut / isp[i]):
             rel[nrel] = i
             nrel += 1
+    lo0 = np.empty(nobs)
+    for r in range(nrel):
+        lo0[rel[r]] = math.log(other[rel[r]] + floor)
+    acc = np.empty(hi + 1)
+    invn = np.empty(hi + 1)
+    for nl in range(1, hi + 1):
+        invn[nl] = float(nl) ** -beta
     ng = gaps.shape[0] + 1
     nw = widths.shape[0] + 1
     best = -np.inf
@@ -689,37 +696,54 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                     n_lo = int(S[i0 + NIN]) if side == 0 else int(S[i0 + NOUT])
                     n_hi = n_lo
                 for nl in range(n_lo, n_hi + 1):
-                    inv = float(nl) ** -beta
-                    ll = logPn[nl]
-                    for r in range(nrel):
-                        i = rel[r]
-                        if dd[i] != dsel:
-                            continue
-                        q = tl[i] - 0.5 * g
-                        kk = math.floor(q / w)
-                        if kk < 0.0:
-                            kk = 0.0
-                        elif kk > nl - 1.0:
-                            kk = nl - 1.0
-                        dl = q - (kk + 0.5) * w
-                        e = base[i] + isp[i] * dl * dl
-                        if e >= cut:
-                            v = 0.0
-                        elif lane_sum:
-                            v = 0.0
-                            for jl in range(nl):
-                                dj = q - (jl + 0.5) * w
+                    acc[nl] = logPn[nl]
+                for r in range(nrel):
+                    i = rel[r]
+                    if dd[i] != dsel:
+                        continue
+                    # log-density relative to "no lane of this arm explains it" (the same
+                    # for every candidate, so left out): 0 unless this arm beats the others
+                    q = tl[i] - 0.5 * g
+                    kf = math.floor(q / w)
+                    if kf < 0.0:
+                        kf = 0.0
+                    last = -1.0
+                    ex = 0.0
+                    cs = 0.0
+                    for nl in range(n_lo, n_hi + 1):
+                        if lane_sum:   # sum over lanes 0..nl-1 (closest must be within cut)
+                            if last < 0.0:
+                                for jl in range(nl):
+                                    dj = q - (jl + 0.5) * w
+                                    ej = base[i] + isp[i] * dj * dj
+                                    if ej < cut:
+                                        cs += math.exp(-ej)
+                            else:
+                                dj = q - (nl - 0.5) * w
                                 ej = base[i] + isp[i] * dj * dj
                                 if ej < cut:
-                                    v += math.exp(-ej)
-                            v *= inv
+                                    cs += math.exp(-ej)
+                            last = 1.0
+                            kk = kf if kf < nl - 1.0 else nl - 1.0
+                            dl = q - (kk + 0.5) * w
+                            if base[i] + isp[i] * dl * dl >= cut:
+                                continue
+                            v = cs * invn[nl]
                         else:
-                            v = math.exp(-e) * inv
-                        if other[i] > v:
-                            v = other[i]
-                        ll += wts[i] * math.log(v + floor)
-                    if ll > sbest:
-                        sbest = ll
+                            kk = kf if kf < nl - 1.0 else nl - 1.0
+                            if kk != last:
+                                last = kk
+                                dl = q - (kk + 0.5) * w
+                                e = base[i] + isp[i] * dl * dl
+                                ex = math.exp(-e) if e < cut else 0.0
+                            if ex == 0.0:
+                                continue
+                            v = ex * invn[nl]
+                        if v > other[i]:
+                            acc[nl] += wts[i] * (math.log(v + floor) - lo0[i])
+                for nl in range(n_lo, n_hi + 1):
+                    if acc[nl] > sbest:
+                        sbest = acc[nl]
                         sn = nl
                 tot += sbest
                 if side == 0:

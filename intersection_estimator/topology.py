@@ -121,8 +121,9 @@ class TopologyConfig:
                                          # changes and arm removals, each followed by
     descent_samples: int = 200           # ... this many continuous moves at descent_temp
     descent_temp: float = 1e-3           # (0 rounds: off; beyond the paper, see _descend)
-    descent_screen: float = 8.0          # candidates scoring this many nats below the
+    descent_screen: float = 8.0          # lane candidates scoring this many nats below the
                                          # current state before the moves are skipped
+    descent_top: int = 4                 # ... and only the best this many get the moves
     chunk: int = 500                     # samples per compiled call (anytime granularity)
     converge_window: int = 2000
     converge_tol: float = 0.5
@@ -200,6 +201,7 @@ class TopologyConfig:
         need('descent_samples', 1 <= self.descent_samples <= 10 ** 6, '[1, 1e6]')
         need('descent_temp', 0 < self.descent_temp <= 1, '(0, 1]')
         need('descent_screen', 0 <= self.descent_screen, '[0, inf)')
+        need('descent_top', 0 <= self.descent_top <= 1000, '[0, 1000]')
         need('chunk', 1 <= self.chunk <= 10 ** 7, '[1, 1e7]')
         need('converge_window', 1 <= self.converge_window, '[1, inf)')
         need('converge_tol', 0 <= self.converge_tol, '[0, inf)')
@@ -426,25 +428,34 @@ class TopologyEstimator:
         A lane-count change moves the optimum of center, angles, gap and width too, so at a
         cold temperature the chain rejects it although the pair of changes scores higher
         (raw detections: in ~3/4 of the wrong lane counts the true counts win once center
-        and gaps follow). Each candidate -- one arm's entering or leaving lanes +-1, or one
-        arm removed -- gets ``descent_samples`` continuous moves at ``descent_temp``; the
-        best improvement is kept, for up to ``descent_rounds`` rounds. Candidates more than
-        ``descent_screen`` nats below the current state before the moves are skipped (raw,
-        seeds 0-59: 40 % of lane candidates skipped, 44 of 46 improvements kept at 6 nats);
-        arm removals are never skipped (an extra arm is only worse until its traffic
-        moves to the neighbour).
-        Monotone in the posterior; draws counted in ``samples_drawn``.
+        and gaps follow). Candidates: one arm's lane counts changed by a step of
+        :data:`DESCENT_STEPS` (that arm's gap and width then set to the best grid point),
+        or one arm removed. The ``descent_top`` best lane candidates within
+        ``descent_screen`` nats of the current state, and every removal (an extra arm is
+        only worse until its traffic moves to the neighbour), get ``descent_samples``
+        continuous moves at ``descent_temp``; the best improvement is kept, for up to
+        ``descent_rounds`` rounds. Monotone in the posterior; draws counted in
+        ``samples_drawn``.
         """
         cfg, c = self.cfg, self._chain
         if cfg.descent_rounds == 0 or len(self._obs) == 0:
             return
         S, L = self._descent_run(c.best_S)
         for _ in range(cfg.descent_rounds):
-            best = None
+            lanes, removals = [], []
             for S2, k in self._descent_candidates(S):
+                if k < 0:
+                    removals.append(S2)
+                    continue
+                S2, L2 = self._descent_prepare(S2, k)
+                if L2 >= L - cfg.descent_screen:
+                    lanes.append((L2, len(lanes), S2))
+            lanes.sort(key=lambda x: (-x[0], x[1]))
+            best = None
+            for S2 in [x[2] for x in lanes[:cfg.descent_top]] + removals:
                 if time.perf_counter() >= self._deadline:
                     break
-                S3, L3 = self._descent_run(S2, L - cfg.descent_screen if k >= 0 else -math.inf, k)
+                S3, L3 = self._descent_run(S2)
                 if L3 > L + 1e-9:
                     best, L = S3, L3
             if best is None:
@@ -473,20 +484,21 @@ class TopologyEstimator:
                 K.remove_arm_at(S, S2, self._t.P, self._t.logqn, k)
                 yield S2, -1
 
-    def _descent_run(self, S, screen=-math.inf, k=-1):
-        """``descent_samples`` continuous moves at ``descent_temp`` from ``S`` (arm ``k``'s
-        gap and width first set to the best grid point for its lane counts):
-        (best, lpost); no moves if ``S`` then scores below ``screen``."""
+    def _descent_prepare(self, S, k):
+        """Arm ``k``'s gap and width set to the best grid point for its lane counts: (S, lpost)."""
+        t = self._t
+        C = np.zeros((K.MAXA, len(self._obs)))
+        self._score(S, C)
+        K.refit_arm(S, k, t.P, t.logPn, *self._obs.kernel_args(), C, t.gaps, t.widths, True)
+        ll, _ = self._score(S, C)
+        return S, ll + float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
+
+    def _descent_run(self, S):
+        """``descent_samples`` continuous moves at ``descent_temp`` from ``S``: (best, lpost)."""
         t, m = self._t, self.cfg.descent_samples
         C = np.zeros((K.MAXA, len(self._obs)))
         ll, _ = self._score(S, C)
-        if k >= 0:
-            S = S.copy()
-            K.refit_arm(S, k, t.P, t.logPn, *self._obs.kernel_args(), C, t.gaps, t.widths, True)
-            ll, _ = self._score(S, C)
         lp = float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
-        if ll + lp < screen:
-            return S, ll + lp
         ch = Chain(S=S.copy(), C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
                    stats=np.zeros(2 * len(K.MOVE_NAMES), np.int64))
         advance(ch, m, np.full(m, self.cfg.descent_temp), int(self._rng.integers(0, 2 ** 31 - 1)),

@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from intersection_estimator import _kernels as K
@@ -134,3 +135,40 @@ def test_ground_truth_scores_higher_than_perturbations():
         lp_gt = est.log_posterior(gt)
         for k, bad in enumerate(_perturbed(gt)):
             assert est.log_posterior(bad) < lp_gt, (mode, k)
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(states(), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5]), st.booleans(),
+       st.booleans())
+def test_refit_arm_finds_the_best_grid_point_of_the_reference_posterior(S, seed, lane_norm,
+                                                                        lane_sum, fixed):
+    """refit_arm (compiled, relative log-densities) picks the (gap, width, lane counts) of
+    arm k that maximise the plain reference posterior over its grid (with ``fixed``: the
+    best gap and width for the counts already there)."""
+    import itertools
+    rng = np.random.default_rng(seed)
+    obs = random_obs(rng, 80, center=S[:2], spread=30.0)
+    cfg = TopologyConfig(lane_norm=lane_norm, lane_sum=lane_sum, cut_sigma2=700.0)
+    tab = _Tables(cfg)
+    k = int(rng.integers(0, int(S[2])))
+    i0 = K.HDR + k * K.STRIDE
+
+    def lpost(T):
+        return (log_likelihood_reference(T, obs, tab.P)
+                + float(K.log_prior(T, tab.logPA, tab.logPn, tab.arm_const)))
+
+    best = -math.inf
+    counts = ([(S[i0 + K.NIN], S[i0 + K.NOUT])] if fixed else
+              itertools.product(range(cfg.min_lanes, cfg.max_lanes + 1), repeat=2))
+    for (ni, no), g, w in itertools.product(list(counts), np.r_[tab.gaps, S[i0 + K.GAP]],
+                                            np.r_[tab.widths, S[i0 + K.WID]]):
+        T = S.copy()
+        T[i0 + K.GAP], T[i0 + K.WID], T[i0 + K.NIN], T[i0 + K.NOUT] = g, w, ni, no
+        best = max(best, lpost(T))
+    R = S.copy()
+    C = np.zeros((K.MAXA, len(obs)))
+    K.full_loglik(R, tab.P, *obs.kernel_args(), C)
+    K.refit_arm(R, k, tab.P, tab.logPn, *obs.kernel_args(), C, tab.gaps, tab.widths, fixed)
+    assert lpost(R) == pytest.approx(best, abs=1e-6)
+    if fixed:
+        assert (R[i0 + K.NIN], R[i0 + K.NOUT]) == (S[i0 + K.NIN], S[i0 + K.NOUT])
