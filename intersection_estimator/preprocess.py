@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from ._kernels import local_pca, split_tracks
+from ._kernels import arm_voxels, local_pca, split_tracks
 from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
@@ -267,53 +267,21 @@ def _assign_arms(xy, c, angles):
 
 
 def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
-    """Arm-aligned voxels with the straight-run filter (see :func:`radar_observations`).
+    """Arm-aligned voxels with the straight-run filter (see :func:`radar_observations`;
+    compiled: :func:`_kernels.arm_voxels`).
 
     Returns mean position, class, weight in vehicle passages (and summed ``vec``)."""
-    si = np.floor(s / cfg.voxel_length).astype(np.int64)
-    ti = np.floor(t / cfg.voxel_width).astype(np.int64)
-    key = ((arm * 1024 + si + 512) * 4096 + ti + 2048) * 4 + cls
-    uk, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-    inv = inv.reshape(-1)
-    p = xy
-    mean = np.stack([np.bincount(inv, p[:, 0], len(uk)), np.bincount(inv, p[:, 1], len(uk))],
-                    axis=1) / cnt[:, None]
-    if cfg.straight_run:   # occupied neighbour (lateral band +-1) before and after
-        step = 4096 * 4
-        before = np.zeros(len(uk), bool)
-        after = np.zeros(len(uk), bool)
-        for dt in (-4, 0, 4):
-            before |= np.isin(uk - step + dt, uk, assume_unique=True)
-            after |= np.isin(uk + step + dt, uk, assume_unique=True)
-        keepv = before & after
-    else:
-        keepv = np.ones(len(uk), bool)
-    # detections per vehicle passage of an along-arm bin (all lateral bins together)
-    band = (arm * 1024 + si + 512) * 4 + cls
-    ub, binv = np.unique(band, return_inverse=True)
-    n_pass = passages(binv.reshape(-1), stamp, len(ub), cfg.passage_gap).sum()
-    per_pass = len(xy) / max(n_pass, 1.0) if cfg.passage_gap > 0 else 1.0
-    sv = np.zeros((len(uk), 2))
+    v = np.zeros((len(xy), 2)) if vec is None else np.asarray(vec, float)
+    mx, my, c, w, svx, svy = arm_voxels(
+        np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+        np.asarray(cls, np.int64), np.asarray(arm, np.int64), np.asarray(s, float),
+        np.asarray(t, float), np.asarray(stamp, float), np.ascontiguousarray(v[:, 0]),
+        np.ascontiguousarray(v[:, 1]), float(cfg.voxel_length), float(cfg.voxel_width),
+        bool(cfg.straight_run), int(cfg.voxel_merge), float(cfg.passage_gap))
+    mean = np.stack([mx, my], axis=1)
     if vec is not None:
-        sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
-                       np.bincount(inv, vec[:, 1], len(uk))], axis=1)
-    uk, mean, cnt, sv = uk[keepv], mean[keepv], cnt[keepv].astype(np.float64), sv[keepv]
-    if cfg.voxel_merge > 1:   # fewer, longer voxels for the sampler (filter ran at full res.)
-        si_k = (uk // (4096 * 4)) % 1024
-        arm_k = uk // (4096 * 4 * 1024)
-        rest = uk % (4096 * 4)
-        key2 = (arm_k * 1024 + si_k // cfg.voxel_merge) * (4096 * 4) + rest
-        u2, inv2 = np.unique(key2, return_inverse=True)
-        inv2 = inv2.reshape(-1)
-        c2 = np.bincount(inv2, cnt, len(u2))
-        mean = np.stack([np.bincount(inv2, cnt * mean[:, 0], len(u2)),
-                         np.bincount(inv2, cnt * mean[:, 1], len(u2))], axis=1) / c2[:, None]
-        sv = np.stack([np.bincount(inv2, sv[:, 0], len(u2)), np.bincount(inv2, sv[:, 1], len(u2))],
-                      axis=1)
-        uk, cnt = u2, c2
-    if vec is not None:
-        return mean, uk % 4, cnt / per_pass, sv
-    return mean, uk % 4, cnt / per_pass
+        return mean, c, w, np.stack([svx, svy], axis=1)
+    return mean, c, w
 
 
 def heading_observations(dets: Detections, center, cfg: PreprocessConfig,

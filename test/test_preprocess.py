@@ -3,12 +3,14 @@
 import math
 
 import numpy as np
+from hypothesis import given, settings, strategies as st
 
 from intersection_estimator.observations import Detections
-from intersection_estimator.preprocess import (PreprocessConfig, heading_observations,
-                                               initial_arm_angles, initial_center,
+from intersection_estimator.preprocess import (PreprocessConfig, _arm_voxels,
+                                               heading_observations, initial_arm_angles, initial_center,
                                                initial_lanes, preprocess, radar_observations,
-                                               seed_lines, tracked_observations, voxelise)
+                                               passages, seed_lines, tracked_observations,
+                                               voxelise)
 
 from topology_scenes import easy_intersection, scene
 
@@ -170,3 +172,78 @@ def test_an_arm_the_chain_has_not_found_keeps_its_radar_and_heading_data():
             w_full = _corridor_weight(full, inter.center, angles[k])
             assert w_full > 0
             assert _corridor_weight(missing, inter.center, angles[k]) > 0.5 * w_full, (mode, k)
+
+
+# ----------------------------------------------------------------- compiled voxels == numpy
+
+def arm_voxels_reference(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
+    """Plain numpy voxelisation, written independently of the compiled kernel.
+
+    Returns mean position, class, weight in vehicle passages (and summed ``vec``)."""
+    si = np.floor(s / cfg.voxel_length).astype(np.int64)
+    ti = np.floor(t / cfg.voxel_width).astype(np.int64)
+    key = ((arm * 1024 + si + 512) * 4096 + ti + 2048) * 4 + cls
+    uk, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    p = xy
+    mean = np.stack([np.bincount(inv, p[:, 0], len(uk)), np.bincount(inv, p[:, 1], len(uk))],
+                    axis=1) / cnt[:, None]
+    if cfg.straight_run:   # occupied neighbour (lateral band +-1) before and after
+        step = 4096 * 4
+        before = np.zeros(len(uk), bool)
+        after = np.zeros(len(uk), bool)
+        for dt in (-4, 0, 4):
+            before |= np.isin(uk - step + dt, uk, assume_unique=True)
+            after |= np.isin(uk + step + dt, uk, assume_unique=True)
+        keepv = before & after
+    else:
+        keepv = np.ones(len(uk), bool)
+    # detections per vehicle passage of an along-arm bin (all lateral bins together)
+    band = (arm * 1024 + si + 512) * 4 + cls
+    ub, binv = np.unique(band, return_inverse=True)
+    n_pass = passages(binv.reshape(-1), stamp, len(ub), cfg.passage_gap).sum()
+    per_pass = len(xy) / max(n_pass, 1.0) if cfg.passage_gap > 0 else 1.0
+    sv = np.zeros((len(uk), 2))
+    if vec is not None:
+        sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
+                       np.bincount(inv, vec[:, 1], len(uk))], axis=1)
+    uk, mean, cnt, sv = uk[keepv], mean[keepv], cnt[keepv].astype(np.float64), sv[keepv]
+    if cfg.voxel_merge > 1:   # fewer, longer voxels for the sampler (filter ran at full res.)
+        si_k = (uk // (4096 * 4)) % 1024
+        arm_k = uk // (4096 * 4 * 1024)
+        rest = uk % (4096 * 4)
+        key2 = (arm_k * 1024 + si_k // cfg.voxel_merge) * (4096 * 4) + rest
+        u2, inv2 = np.unique(key2, return_inverse=True)
+        inv2 = inv2.reshape(-1)
+        c2 = np.bincount(inv2, cnt, len(u2))
+        mean = np.stack([np.bincount(inv2, cnt * mean[:, 0], len(u2)),
+                         np.bincount(inv2, cnt * mean[:, 1], len(u2))], axis=1) / c2[:, None]
+        sv = np.stack([np.bincount(inv2, sv[:, 0], len(u2)), np.bincount(inv2, sv[:, 1], len(u2))],
+                      axis=1)
+        uk, cnt = u2, c2
+    if vec is not None:
+        return mean, uk % 4, cnt / per_pass, sv
+    return mean, uk % 4, cnt / per_pass
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10 ** 6), st.sampled_from([1, 2, 3]), st.booleans(),
+       st.sampled_from([0.0, 1.0]), st.booleans())
+def test_compiled_arm_voxels_equal_the_numpy_reference(seed, merge, straight, gap, with_vec):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 3000))
+    arm = rng.integers(0, 4, n)
+    s = rng.uniform(-5.0, 90.0, n)
+    t = rng.normal(0.0, 6.0, n)
+    xy = np.stack([s * 0.7 - t * 0.3, s * 0.3 + t * 0.7], axis=1)
+    cls = rng.integers(0, 3, n)
+    stamp = rng.uniform(0.0, 30.0, n)
+    if seed % 2:   # sensor cycles: exact 1 s gaps
+        stamp = np.round(stamp, 1)
+    vec = rng.normal(size=(n, 2)) if with_vec else None
+    cfg = PreprocessConfig(voxel_merge=merge, straight_run=straight, passage_gap=gap)
+    got = _arm_voxels(xy, cls, arm, s, t, stamp, cfg, vec)
+    want = arm_voxels_reference(xy, cls, arm, s, t, stamp, cfg, vec)
+    assert len(got) == len(want)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-9)
