@@ -1018,3 +1018,81 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
         oy[r] /= ow[r]
         ow[r] /= per_pass
     return ox[:g], oy[:g], oc[:g], ow[:g], ovx[:g], ovy[:g]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _nearest_ray(px, py, ux, uy):
+    """Among the rays (from the origin, unit directions ``ux, uy``) that ``(px, py)`` lies
+    ahead of, the one with the smallest lateral offset: (index, s, t); -1 if none."""
+    best = -1
+    bs = 0.0
+    bt = np.inf
+    for k in range(ux.shape[0]):
+        s = px * ux[k] + py * uy[k]
+        if s <= 0.0:
+            continue
+        t = py * ux[k] - px * uy[k]
+        if abs(t) < abs(bt):
+            best = k
+            bs = s
+            bt = t
+    return best, bs, bt
+
+
+@njit(cache=True, nogil=True)
+def radar_frame(x, y, dop, sx, sy, cx, cy, angles, reach, min_cos, min_dop, keep_unknown, rays):
+    """Per radar row (paper §II-A, see ``preprocess.radar_observations``): nearest arm (or
+    ray), s, t, group (0 dropped, 1 on an arm, 2 on no arm: along ``rays``, or square
+    voxels if ``rays`` is empty) and direction class (0 leaving, 1 entering, 2 unknown)
+    from the Doppler sign and the line of sight (from the sensor, or the center if the
+    sensor position is NaN) projected on the arm direction (radial off the arms)."""
+    n = x.shape[0]
+    aux = np.cos(angles)
+    auy = np.sin(angles)
+    rux = np.cos(rays)
+    ruy = np.sin(rays)
+    arm = np.zeros(n, np.int64)
+    s_out = np.zeros(n)
+    t_out = np.zeros(n)
+    group = np.zeros(n, np.int8)
+    cls = np.zeros(n, np.int64)
+    for i in range(n):
+        px = x[i] - cx
+        py = y[i] - cy
+        r = math.hypot(px, py)
+        ox = sx[i] if math.isfinite(sx[i]) and math.isfinite(sy[i]) else cx
+        oy = sy[i] if math.isfinite(sx[i]) and math.isfinite(sy[i]) else cy
+        lx = x[i] - ox
+        ly = y[i] - oy
+        ll = math.hypot(lx, ly)
+        if r <= 1e-9 or ll <= 1e-9:
+            continue
+        lx /= ll
+        ly /= ll
+        rx = px / r
+        ry = py / r
+        k, s, t = _nearest_ray(px, py, aux, auy)
+        on = k >= 0 and abs(t) <= reach
+        if on:   # on an arm the lane direction is the arm's, not the radial direction
+            rx = aux[k]
+            ry = auy[k]
+        proj = rx * lx + ry * ly
+        unknown = abs(proj) < min_cos or abs(dop[i]) < min_dop
+        if unknown and not keep_unknown:
+            continue
+        cls[i] = 2 if unknown else (0 if dop[i] * proj > 0.0 else 1)
+        if on:
+            group[i] = 1
+            arm[i] = k
+            s_out[i] = s
+            t_out[i] = t
+        elif rays.shape[0] == 0:
+            group[i] = 2
+        else:
+            k, s, t = _nearest_ray(px, py, rux, ruy)
+            if k >= 0:
+                group[i] = 2
+                arm[i] = k
+                s_out[i] = s
+                t_out[i] = t
+    return arm, s_out, t_out, group, cls

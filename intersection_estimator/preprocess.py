@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from ._kernels import arm_voxels, local_pca, split_tracks
+from ._kernels import arm_voxels, local_pca, radar_frame, split_tracks
 from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
@@ -189,27 +189,18 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     if not m.any():
         return ObservationSet.empty()
     c = np.asarray(center, float)
-    xy, dop, sxy, ts = dets.xy[m], dets.doppler[m], dets.sensor_xy[m], dets.t[m]
-    rx, ry, okr = _unit(xy[:, 0] - c[0], xy[:, 1] - c[1])
-    has_s = np.isfinite(sxy).all(axis=1)
-    lx, ly, okl = _unit(xy[:, 0] - np.where(has_s, sxy[:, 0], c[0]),
-                        xy[:, 1] - np.where(has_s, sxy[:, 1], c[1]))
-    arm, s_arm, t_arm, on = _on_arms(xy, c, arm_angles, cfg)
-    if on.any():   # on an arm the lane direction is the arm's, not the radial direction
-        ang = np.asarray(arm_angles, float)
-        rx, ry = np.where(on, np.cos(ang)[arm], rx), np.where(on, np.sin(ang)[arm], ry)
-    proj = rx * lx + ry * ly
-    keep = okr & okl
-    # direction from the Doppler sign; unknown (class 2, d = 0) where the motion is across
-    # the line of sight or the Doppler is too small to tell
-    unknown = (np.abs(proj) < cfg.min_radial_cos) | (np.abs(dop) < cfg.min_doppler)
-    if not cfg.keep_unknown_direction:
-        keep &= ~unknown
-    cls = np.where(unknown, 2, np.where(dop * proj > 0, 0, 1)).astype(np.int64)
-    a, b = keep & on, keep & ~on
+    xy, ts = dets.xy[m], dets.t[m]
+    known = _arms_known(arm_angles, cfg)
+    angles = np.asarray(arm_angles if known else [], float)
+    arm, s_arm, t_arm, group, cls = radar_frame(
+        np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), dets.doppler[m],
+        np.ascontiguousarray(dets.sensor_xy[m, 0]), np.ascontiguousarray(dets.sensor_xy[m, 1]),
+        float(c[0]), float(c[1]), angles, float(cfg.arm_reach), float(cfg.min_radial_cos),
+        float(cfg.min_doppler), bool(cfg.keep_unknown_direction), RAYS if known else angles)
+    a, b = group == 1, group == 2
     va = _arm_voxels(xy[a], cls[a], arm[a], s_arm[a], t_arm[a], ts[a], cfg)
-    if _arms_known(arm_angles, cfg):
-        vb = _ray_voxels(xy[b], cls[b], c, ts[b], cfg)     # arm not found yet
+    if known:    # rows on no current arm: along rays (arm not found yet)
+        vb = _arm_voxels(xy[b], cls[b], arm[b], s_arm[b], t_arm[b], ts[b], cfg)
     else:
         vb = voxelise(xy[b], cls[b], cfg.voxel_size, t=ts[b], gap=cfg.passage_gap)[:3]
     vxy, vcls, cnt = (np.concatenate([p, q]) for p, q in zip(va, vb))
