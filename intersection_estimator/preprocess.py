@@ -45,7 +45,9 @@ class PreprocessConfig:
     voxel_length: float = 10.0          # [m] radar voxels along an arm (0: square voxels)
     voxel_width: float = 1.0            # [m] ... and across it
     straight_run: bool = True           # drop radar voxels off straight lane runs
-    voxel_merge: int = 2                # then merge this many along-arm voxels
+    voxel_merge: int = 3                # then merge this many along-arm voxels (radar)
+    heading_voxel_merge: int = 2        # ... (lidar / camera rows: one per vehicle and cycle,
+                                        # a third of the radar's detections)
     heading_sectors: int = 8            # heading voxelisation: sectors of 360/n deg
     passage_gap: float = 1.0            # [s] stamps further apart: another vehicle passage
                                         # (0: weights in raw detection counts)
@@ -236,14 +238,14 @@ def _on_arms(xy, c, arm_angles, cfg: PreprocessConfig):
 RAYS = np.radians(np.arange(-180.0, 180.0, 10.0))
 
 
-def _ray_voxels(xy, cls, c, stamp, cfg: PreprocessConfig, vec=None):
+def _ray_voxels(xy, cls, c, stamp, cfg: PreprocessConfig, vec=None, merge=None):
     """Rows on no current arm: voxels aligned with the nearest of :data:`RAYS` from the
     center, with the straight-run filter -- an unfound arm's traffic runs radially and
     survives, isolated clutter and turning traffic do not."""
     arm, s, t = _assign_arms(xy, c, RAYS)
     ok = s > 0
     return _arm_voxels(xy[ok], cls[ok], arm[ok], s[ok], t[ok], stamp[ok], cfg,
-                       None if vec is None else vec[ok])
+                       None if vec is None else vec[ok], merge)
 
 
 def _assign_arms(xy, c, angles):
@@ -257,7 +259,7 @@ def _assign_arms(xy, c, angles):
     return arm, s[r, arm], t[r, arm]
 
 
-def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
+def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None, merge=None):
     """Arm-aligned voxels with the straight-run filter (see :func:`radar_observations`;
     compiled: :func:`_kernels.arm_voxels`).
 
@@ -268,7 +270,8 @@ def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None):
         np.asarray(cls, np.int64), np.asarray(arm, np.int64), np.asarray(s, float),
         np.asarray(t, float), np.asarray(stamp, float), np.ascontiguousarray(v[:, 0]),
         np.ascontiguousarray(v[:, 1]), float(cfg.voxel_length), float(cfg.voxel_width),
-        bool(cfg.straight_run), int(cfg.voxel_merge), float(cfg.passage_gap))
+        bool(cfg.straight_run), int(cfg.voxel_merge if merge is None else merge),
+        float(cfg.passage_gap))
     mean = np.stack([mx, my], axis=1)
     if vec is not None:
         return mean, c, w, np.stack([svx, svy], axis=1)
@@ -295,13 +298,14 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
         ang = np.asarray(arm_angles, float)
         cls = (vec[:, 0] * np.cos(ang)[arm] + vec[:, 1] * np.sin(ang)[arm] < 0).astype(np.int64)
         vxy, _, cnt, sv = _arm_voxels(xy[on], cls[on], arm[on], s_arm[on], t_arm[on], ts[on],
-                                      cfg, vec[on])
+                                      cfg, vec[on], cfg.heading_voxel_merge)
         parts.append((vxy, cnt, sv))
     if (~on).any():
         if on.any():   # arms known: the rest along rays from the center
             rad = np.arctan2(xy[~on, 1] - c[1], xy[~on, 0] - c[0])
             cls = (vec[~on, 0] * np.cos(rad) + vec[~on, 1] * np.sin(rad) < 0).astype(np.int64)
-            vxy, _, cnt, sv = _ray_voxels(xy[~on], cls, c, ts[~on], cfg, vec[~on])
+            vxy, _, cnt, sv = _ray_voxels(xy[~on], cls, c, ts[~on], cfg, vec[~on],
+                                          cfg.heading_voxel_merge)
         else:
             sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
             vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
