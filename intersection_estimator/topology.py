@@ -71,7 +71,7 @@ class TopologyConfig:
     sigma_point: float = 1.2             # [m] sigma_perp of a detection (raw / heading voxel)
     sigma_angle_deg: float = 5.0         # heading of a trajectory part / detection
     pca_radius: float = 8.0              # [m] initial center: local PCA of radar voxels
-    min_arm_support: float = 2.5         # reported arms explain at least this weight (see best)
+    min_arm_support: float = 2.5         # reported arms explain >= this many vehicle passages
     clutter_floor: float = 0.01          # uniform outlier level relative to the peak density
     cut_sigma2: float = 30.0             # densities below exp(-cut) are 0 (speed)
     lane_sum: bool = False               # sum over lanes (paper eq.) instead of the closest
