@@ -1040,6 +1040,25 @@ def _nearest_ray(px, py, ux, uy):
 
 
 @njit(cache=True, nogil=True)
+def nearest_rays(x, y, cx, cy, angles):
+    """Per point: nearest of the rays from ``(cx, cy)`` at ``angles`` that it lies ahead
+    of (:func:`_nearest_ray`), its s and t; (0, 0, 0) where it lies ahead of none."""
+    n = x.shape[0]
+    ux = np.cos(angles)
+    uy = np.sin(angles)
+    arm = np.zeros(n, np.int64)
+    s_out = np.zeros(n)
+    t_out = np.zeros(n)
+    for i in range(n):
+        k, s, t = _nearest_ray(x[i] - cx, y[i] - cy, ux, uy)
+        if k >= 0:
+            arm[i] = k
+            s_out[i] = s
+            t_out[i] = t
+    return arm, s_out, t_out
+
+
+@njit(cache=True, nogil=True)
 def radar_frame(x, y, dop, sx, sy, cx, cy, angles, reach, min_cos, min_dop, keep_unknown, rays):
     """Per radar row (paper §II-A, see ``preprocess.radar_observations``): nearest arm (or
     ray), s, t, group (0 dropped, 1 on an arm, 2 on no arm: along ``rays``, or square

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from ._kernels import arm_voxels, local_pca, radar_frame, split_tracks
+from ._kernels import arm_voxels, local_pca, nearest_rays, radar_frame, split_tracks
 from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
@@ -183,9 +183,11 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     ``voxel_length`` along it, ``voxel_width`` across, so a voxel never mixes lanes yet
     covers a long piece of one; voxels without an occupied neighbour voxel in the same
     lateral band on both sides along the arm are dropped -- they are not on a straight
-    lane (turning vehicles inside the box, isolated clutter). Rows on no current arm are
-    voxelised along rays from the center (:func:`_ray_voxels`). Without arms: square
-    voxels.
+    lane (turning vehicles inside the box, isolated clutter). Rows on no current arm
+    (farther than ``arm_reach`` from every arm's axis) are voxelised along :data:`RAYS`
+    from the center, so that an arm the chain has not found yet keeps its data. The frame
+    of every row is computed in one compiled pass (:func:`_kernels.radar_frame`).
+    Without arms: square voxels.
     """
     m = radar_filter(dets, cfg, moving_only=False)
     if not m.any():
@@ -198,7 +200,7 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
         np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), dets.doppler[m],
         np.ascontiguousarray(dets.sensor_xy[m, 0]), np.ascontiguousarray(dets.sensor_xy[m, 1]),
         float(c[0]), float(c[1]), angles, float(cfg.arm_reach), float(cfg.min_radial_cos),
-        float(cfg.min_doppler), bool(cfg.keep_unknown_direction), RAYS if known else angles)
+        float(cfg.min_doppler), bool(cfg.keep_unknown_direction), RAYS if known else np.zeros(0))
     a, b = group == 1, group == 2
     va = _arm_voxels(xy[a], cls[a], arm[a], s_arm[a], t_arm[a], ts[a], cfg)
     if known:    # rows on no current arm: along rays (arm not found yet)
@@ -222,8 +224,9 @@ def _arms_known(arm_angles, cfg: PreprocessConfig) -> bool:
 
 def _on_arms(xy, c, arm_angles, cfg: PreprocessConfig):
     """Nearest arm, s, t of every row and whether it lies on that arm: ahead of the center
-    and within ``arm_reach`` of its axis. Rows on no current arm are voxelised along rays
-    from the center (:func:`_ray_voxels`), so that an arm the chain has not found yet
+    and within ``arm_reach`` of its axis (lidar / camera rows; radar rows get the same
+    frame from :func:`_kernels.radar_frame`). Rows on no current arm are voxelised along
+    rays from the center (:func:`_ray_voxels`), so that an arm the chain has not found yet
     keeps its data (aligned with a neighbouring arm they would look like crossing
     traffic and be filtered out, and the arm could never be added)."""
     n = len(xy)
@@ -234,7 +237,7 @@ def _on_arms(xy, c, arm_angles, cfg: PreprocessConfig):
     return arm, s, t, (s > 0) & (np.abs(t) <= cfg.arm_reach)
 
 
-#: Rays every 10 deg: the frame of rows on no current arm (see :func:`_on_arms`).
+#: Rays every 10 deg: the frame of rows on no current arm (see :func:`radar_observations`).
 RAYS = np.radians(np.arange(-180.0, 180.0, 10.0))
 
 
@@ -249,14 +252,11 @@ def _ray_voxels(xy, cls, c, stamp, cfg: PreprocessConfig, vec=None, merge=None):
 
 
 def _assign_arms(xy, c, angles):
-    """Nearest arm (smallest lateral offset among arms the point lies ahead of), s, t."""
-    v = xy - c
-    u = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    s = v @ u.T
-    t = v @ np.stack([-u[:, 1], u[:, 0]], axis=1).T
-    arm = np.argmin(np.where(s > 0, np.abs(t), np.inf), axis=1)
-    r = np.arange(len(v))
-    return arm, s[r, arm], t[r, arm]
+    """Nearest arm (smallest lateral offset among arms the point lies ahead of), s, t;
+    s = 0 where it lies ahead of none (compiled: :func:`_kernels.nearest_rays`, the rule
+    :func:`_kernels.radar_frame` applies to radar rows)."""
+    return nearest_rays(np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+                        float(c[0]), float(c[1]), np.asarray(angles, float))
 
 
 def _arm_voxels(xy, cls, arm, s, t, stamp, cfg: PreprocessConfig, vec=None, merge=None):
