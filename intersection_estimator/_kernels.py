@@ -405,6 +405,50 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     center; behind the ray start the Euclidean distance to the start is used. With an
     orientation the direction is arm-local (entering iff <o, u_a> < 0).
     """
+    if P[P_LANE_SUM] > 0.0:
+        _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out)
+        return
+    cx = S[0]
+    cy = S[1]
+    i0 = HDR + k * STRIDE
+    a = S[i0 + ANG]
+    hg = 0.5 * S[i0 + GAP]
+    nin = S[i0 + NIN]
+    nout = S[i0 + NOUT]
+    w = S[i0 + WID]
+    ux = math.cos(a)
+    uy = math.sin(a)
+    ts = P[P_TRAFFIC]
+    inv_n_in = nin ** -P[P_LANE_NORM]
+    inv_n_out = nout ** -P[P_LANE_NORM]
+    n = ox.shape[0]
+    energy = np.empty(n)
+    # pass 1, branch-free (vectorises): energy of the closest lane and the lane-count
+    # normalisation; pass 2: the exponential only below the cut
+    for i in range(n):
+        px = ox[i] - cx
+        py = oy[i] - cy
+        s = px * ux + py * uy
+        t = py * ux - px * uy
+        c = hx[i] * ux + hy[i] * uy
+        side = 1.0 if t * ts > 0.0 else -1.0
+        dd = dcls[i] if dcls[i] != 0.0 else side
+        d = (1.0 if c < 0.0 else -1.0) if has_o[i] else dd
+        e = isa[i] * 2.0 * (1.0 - abs(c)) if has_o[i] else 0.0
+        nl = nin if d > 0.0 else nout
+        q = d * ts * t - hg
+        dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
+        sb = min(s, 0.0)
+        energy[i] = e + isp[i] * (sb * sb + dl * dl)
+        out[i] = inv_n_in if d > 0.0 else inv_n_out
+    cut = P[P_D2_CUT]
+    for i in range(n):
+        out[i] = out[i] * math.exp(-energy[i]) if energy[i] < cut else 0.0
+
+
+@njit(cache=True, fastmath=True)
+def _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
+    """:func:`arm_column` with the sum over the lanes of that direction (``P_LANE_SUM``)."""
     cx = S[0]
     cy = S[1]
     i0 = HDR + k * STRIDE
@@ -419,7 +463,6 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     ts = P[P_TRAFFIC]
     inv_n_in = nin ** -P[P_LANE_NORM]
     inv_n_out = nout ** -P[P_LANE_NORM]
-    lane_sum = P[P_LANE_SUM] > 0.0
     for i in range(ox.shape[0]):
         s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
         if e >= cut:
@@ -438,15 +481,12 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
         if e >= cut:
             out[i] = 0.0
             continue
-        if lane_sum:
-            v = 0.0
-            for j in range(int(nl)):
-                dj = q - (j + 0.5) * w
-                ej = e0 + isp[i] * dj * dj
-                if ej < cut:
-                    v += math.exp(-ej)
-        else:
-            v = math.exp(-e)
+        v = 0.0
+        for j in range(int(nl)):
+            dj = q - (j + 0.5) * w
+            ej = e0 + isp[i] * dj * dj
+            if ej < cut:
+                v += math.exp(-ej)
         out[i] = v * (inv_n_in if d > 0.0 else inv_n_out)
 
 
@@ -932,18 +972,20 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
         band[i] = (arm[i] * 1024 + si + 512) * 4 + cls[i]
     # detections per vehicle passage of an along-arm band (all lateral bins together)
     per_pass = 1.0
-    if gap > 0.0 and n > 0:   # one sort by (band, stamp to the ms), float gaps
-        t0 = stamp.min()
-        bt = np.empty(n, np.int64)
-        for i in range(n):
-            bt[i] = (band[i] << 32) + np.int64(round((stamp[i] - t0) * 1000.0))
-        ob = np.argsort(bt)
-        n_pass = 1
-        for r in range(1, n):
-            p = ob[r - 1]
-            q = ob[r]
-            if band[q] != band[p] or stamp[q] - stamp[p] > gap:
+    if gap > 0.0 and n > 0:   # rows in time order; a band's stamp more than gap after its last
+        order = np.arange(n)
+        for i in range(1, n):
+            if stamp[i] < stamp[i - 1]:
+                order = np.argsort(stamp, kind='mergesort')
+                break
+        b0 = band.min()
+        last = np.full(band.max() - b0 + 1, -np.inf)
+        n_pass = 0
+        for r in range(n):
+            i = order[r]
+            if stamp[i] - last[band[i] - b0] > gap:
                 n_pass += 1
+            last[band[i] - b0] = stamp[i]
         per_pass = n / float(n_pass)
     # unique voxels: count and sums
     o = np.argsort(key)

@@ -121,13 +121,16 @@ class TopologyConfig:
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule
     descent_rounds: int = 2              # end of the schedule: greedy descent over lane-count
                                          # changes and arm removals, each followed by
-    descent_samples: int = 200           # ... this many continuous moves at descent_temp
+    descent_samples: int = 400           # ... this many continuous moves at descent_temp
     descent_temp: float = 1e-3           # (0 rounds: off; beyond the paper, see _descend)
-    descent_screen: float = 8.0          # lane candidates scoring this many nats below the
-                                         # current state before the moves are skipped
-    descent_top: int = 0                 # ... and only the best this many (0: all) get the
-                                         # moves (raw, 1000 cases: all 84.9 % 71 ms,
-                                         # 4: 82.9 % 62 ms)
+    descent_screen: float = 3.5          # a candidate is dropped once its best is this many
+                                         # nats x (share of its moves left) below the best
+                                         # state so far: before its moves (lane candidates),
+                                         # after 1/8, 1/4 and 1/2 of them (raw, 200 cases:
+                                         # no improving candidate lost, 60 % of moves saved)
+    descent_top: int = 0                 # ... and only the best this many lane candidates
+                                         # (0: all) get the moves (raw, 1000 cases, before
+                                         # the staged screen: all 84.9 %, 4: 82.9 %)
     chunk: int = 500                     # samples per compiled call (anytime granularity)
     converge_window: int = 2000
     converge_tol: float = 0.5
@@ -438,7 +441,8 @@ class TopologyEstimator:
         or one arm removed. The lane candidates within ``descent_screen`` nats of the
         current state (the ``descent_top`` best of them if > 0), and every removal (an extra arm is
         only worse until its traffic moves to the neighbour), get ``descent_samples``
-        continuous moves at ``descent_temp``; the best improvement is kept, for up to
+        continuous moves at ``descent_temp`` in stages, dropped as soon as they fall behind
+        (see :meth:`_descent_run`); the best improvement is kept, for up to
         ``descent_rounds`` rounds. Monotone in the posterior; draws counted in
         ``samples_drawn``.
         """
@@ -461,7 +465,7 @@ class TopologyEstimator:
             for S2 in [x[2] for x in top] + removals:
                 if time.perf_counter() >= self._deadline:
                     break
-                S3, L3 = self._descent_run(S2)
+                S3, L3 = self._descent_run(S2, L)
                 if L3 > L + 1e-9:
                     best, L = S3, L3
             if best is None:
@@ -499,17 +503,29 @@ class TopologyEstimator:
         ll, _ = self._score(S, C)
         return S, ll + float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
 
-    def _descent_run(self, S):
-        """``descent_samples`` continuous moves at ``descent_temp`` from ``S``: (best, lpost)."""
-        t, m = self._t, self.cfg.descent_samples
+    def _descent_run(self, S, ref=None):
+        """``descent_samples`` continuous moves at ``descent_temp`` from ``S``: (best, lpost).
+
+        With ``ref`` (the best log posterior so far) the moves run in stages ending at 1/8,
+        1/4, 1/2 and all of them, and stop after a stage whose best is more than
+        ``descent_screen`` x (share of moves left) nats below ``ref``."""
+        t, cfg = self._t, self.cfg
+        m = cfg.descent_samples
         C = np.zeros((K.MAXA, len(self._obs)))
         ll, _ = self._score(S, C)
         lp = float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
         ch = Chain(S=S.copy(), C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
                    stats=np.zeros(2 * len(K.MOVE_NAMES), np.int64))
-        advance(ch, m, np.full(m, self.cfg.descent_temp), int(self._rng.integers(0, 2 ** 31 - 1)),
-                t.P_polish, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn, self._obs)
-        self.samples_drawn += m
+        ends = (m,) if ref is None else sorted({max(1, m // 8), max(1, m // 4), max(1, m // 2), m})
+        for end in ends:
+            n = end - ch.step
+            if n <= 0:
+                continue
+            advance(ch, n, np.full(n, cfg.descent_temp), int(self._rng.integers(0, 2 ** 31 - 1)),
+                    t.P_polish, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn, self._obs)
+            self.samples_drawn += n
+            if end < m and ch.best_lpost < ref - cfg.descent_screen * (1.0 - end / m):
+                break
         return ch.best_S, ch.best_lpost
 
     def _complete_arms(self, angles, o, w):
