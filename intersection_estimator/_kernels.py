@@ -949,6 +949,57 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
     return out[:m]
 
 
+#: Largest (arm x along x lateral x class) box of voxel cells counted in a dense table;
+#: larger extents (far-flung rows) fall back to sorting the keys.
+DENSE_CELLS = 1 << 22
+
+
+@njit(cache=True, nogil=True)
+def _voxel_slots(key, arm, sb, tb, cls):
+    """Sorted unique ``key`` values and each row's index into them. Keys order rows by
+    (arm, along bin, lateral bin, class); within a small extent the cells are counted in
+    a dense table (no sort), otherwise the keys are sorted."""
+    n = key.shape[0]
+    slot = np.empty(n, np.int64)
+    if n == 0:
+        return np.empty(0, np.int64), slot
+    a0, a1, s0, s1, t0, t1 = arm.min(), arm.max(), sb.min(), sb.max(), tb.min(), tb.max()
+    ns = s1 - s0 + 1
+    nt = t1 - t0 + 1
+    size = (a1 - a0 + 1) * ns * nt * 4
+    if size <= DENSE_CELLS:
+        code = np.empty(n, np.int64)
+        rank = np.full(size, -1, np.int64)
+        for i in range(n):
+            code[i] = (((arm[i] - a0) * ns + sb[i] - s0) * nt + tb[i] - t0) * 4 + cls[i]
+            rank[code[i]] = 0
+        uk = np.empty(n, np.int64)
+        m = 0
+        for c in range(size):
+            if rank[c] == 0:
+                rank[c] = m
+                a = c // (ns * nt * 4)
+                r = c - a * ns * nt * 4
+                si = r // (nt * 4)
+                r -= si * nt * 4
+                ti = r // 4
+                uk[m] = (((a + a0) * 1024 + si + s0 + 512) * 4096 + ti + t0 + 2048) * 4 + r - ti * 4
+                m += 1
+        for i in range(n):
+            slot[i] = rank[code[i]]
+        return uk[:m], slot
+    o = np.argsort(key)
+    uk = np.empty(n, np.int64)
+    m = -1
+    for r in range(n):
+        i = o[r]
+        if m < 0 or key[i] != uk[m]:
+            m += 1
+            uk[m] = key[i]
+        slot[i] = m
+    return uk[:m + 1], slot
+
+
 @njit(cache=True, nogil=True)
 def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, merge, gap):
     """Arm-aligned voxels of radar / heading rows (paper §II-A voxelisation; see
@@ -965,11 +1016,13 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
     step = 4096 * 4
     key = np.empty(n, np.int64)
     band = np.empty(n, np.int64)
+    sb = np.empty(n, np.int64)
+    tb = np.empty(n, np.int64)
     for i in range(n):
-        si = np.int64(math.floor(s[i] / length))
-        ti = np.int64(math.floor(t[i] / width))
-        key[i] = ((arm[i] * 1024 + si + 512) * 4096 + ti + 2048) * 4 + cls[i]
-        band[i] = (arm[i] * 1024 + si + 512) * 4 + cls[i]
+        sb[i] = np.int64(math.floor(s[i] / length))
+        tb[i] = np.int64(math.floor(t[i] / width))
+        key[i] = ((arm[i] * 1024 + sb[i] + 512) * 4096 + tb[i] + 2048) * 4 + cls[i]
+        band[i] = (arm[i] * 1024 + sb[i] + 512) * 4 + cls[i]
     # detections per vehicle passage of an along-arm band (all lateral bins together)
     per_pass = 1.0
     if gap > 0.0 and n > 0:   # rows in time order; a band's stamp more than gap after its last
@@ -988,26 +1041,20 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
             last[band[i] - b0] = stamp[i]
         per_pass = n / float(n_pass)
     # unique voxels: count and sums
-    o = np.argsort(key)
-    uk = np.empty(n, np.int64)
+    uk, slot = _voxel_slots(key, arm, sb, tb, cls)
+    m = uk.shape[0]
     cnt = np.zeros(n)
     sx = np.zeros(n)
     sy = np.zeros(n)
     svx = np.zeros(n)
     svy = np.zeros(n)
-    m = -1
-    for r in range(n):
-        i = o[r]
-        if m < 0 or key[i] != uk[m]:
-            m += 1
-            uk[m] = key[i]
-        cnt[m] += 1.0
-        sx[m] += x[i]
-        sy[m] += y[i]
-        svx[m] += vx[i]
-        svy[m] += vy[i]
-    m += 1
-    uk = uk[:m]
+    for i in range(n):
+        j = slot[i]
+        cnt[j] += 1.0
+        sx[j] += x[i]
+        sy[j] += y[i]
+        svx[j] += vx[i]
+        svy[j] += vy[i]
     keep = np.ones(m, np.bool_)
     if straight:
         for j in range(m):

@@ -235,6 +235,8 @@ def test_compiled_arm_voxels_equal_the_numpy_reference(seed, merge, straight, ga
     arm = rng.integers(0, 4, n)
     s = rng.uniform(-5.0, 90.0, n)
     t = rng.normal(0.0, 6.0, n)
+    if seed % 5 == 0 and n:   # one far-flung row: too wide for the dense cell table
+        s[0], t[0] = 4000.0, 1500.0
     xy = np.stack([s * 0.7 - t * 0.3, s * 0.3 + t * 0.7], axis=1)
     cls = rng.integers(0, 3, n)
     stamp = rng.uniform(0.0, 30.0, n)
