@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,8 +31,8 @@ from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
 
-__all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations',
-           'heading_observations', 'preprocess', 'voxelise', 'seed_lines',
+__all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations', 'RadarRows',
+           'radar_rows', 'heading_observations', 'preprocess', 'voxelise', 'seed_lines',
            'initial_center', 'initial_arm_angles']
 
 
@@ -175,8 +176,30 @@ def radar_filter(dets: Detections, cfg: PreprocessConfig, moving_only: bool = Tr
     return m
 
 
+class RadarRows(NamedTuple):
+    """Radar rows surviving the clutter filter, center-free (see :func:`radar_rows`)."""
+
+    xy: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    t: np.ndarray
+    doppler: np.ndarray
+    sensor_x: np.ndarray
+    sensor_y: np.ndarray
+
+
+def radar_rows(dets: Detections, cfg: PreprocessConfig) -> RadarRows:
+    """The rows :func:`radar_observations` voxelises, filtered once per data set: callers
+    that preprocess the same detections around several centers pass it along."""
+    m = radar_filter(dets, cfg, moving_only=False)
+    xy = dets.xy[m]
+    return RadarRows(xy, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+                     dets.t[m], dets.doppler[m], np.ascontiguousarray(dets.sensor_xy[m, 0]),
+                     np.ascontiguousarray(dets.sensor_xy[m, 1]))
+
+
 def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
-                       arm_angles=None) -> ObservationSet:
+                       arm_angles=None, rows: RadarRows | None = None) -> ObservationSet:
     """Doppler -> driving direction relative to ``center``, then voxelise per class.
 
     With ``arm_angles`` (the current arms) the voxels are aligned with the nearest arm:
@@ -189,16 +212,15 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     of every row is computed in one compiled pass (:func:`_kernels.radar_frame`).
     Without arms: square voxels.
     """
-    m = radar_filter(dets, cfg, moving_only=False)
-    if not m.any():
+    rows = radar_rows(dets, cfg) if rows is None else rows
+    if not len(rows.t):
         return ObservationSet.empty()
     c = np.asarray(center, float)
-    xy, ts = dets.xy[m], dets.t[m]
+    xy, ts = rows.xy, rows.t
     known = _arms_known(arm_angles, cfg)
     angles = np.asarray(arm_angles if known else [], float)
     arm, s_arm, t_arm, group, cls = radar_frame(
-        np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), dets.doppler[m],
-        np.ascontiguousarray(dets.sensor_xy[m, 0]), np.ascontiguousarray(dets.sensor_xy[m, 1]),
+        rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y,
         float(c[0]), float(c[1]), angles, float(cfg.arm_reach), float(cfg.min_radial_cos),
         float(cfg.min_doppler), bool(cfg.keep_unknown_direction), RAYS if known else np.zeros(0))
     a, b = group == 1, group == 2
@@ -327,11 +349,13 @@ def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig) -> Observat
     return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist)
 
 
-def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None) -> ObservationSet:
-    """All observation kinds of ``dets`` for the current ``center`` (paper §II-A)."""
+def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
+               radar: RadarRows | None = None) -> ObservationSet:
+    """All observation kinds of ``dets`` for the current ``center`` (paper §II-A);
+    ``radar``: :func:`radar_rows` of ``dets.finite()`` when already at hand."""
     dets = dets.finite()
     return ObservationSet.concat([tracked_observations(dets, center, cfg),
-                                  radar_observations(dets, center, cfg, arm_angles),
+                                  radar_observations(dets, center, cfg, arm_angles, radar),
                                   heading_observations(dets, center, cfg, arm_angles)])
 
 
@@ -381,15 +405,17 @@ def initial_center(p: np.ndarray, o: np.ndarray, w: np.ndarray, scale: float = 6
     if len(p) == 0:
         return None
     c0 = np.array([_wmedian(p[:, 0], w), _wmedian(p[:, 1], w)])
-    n = np.stack([-o[:, 1], o[:, 0]], axis=1)
+    nx, ny = -o[:, 1], o[:, 0]
+    d = nx * p[:, 0] + ny * p[:, 1]                 # line i: <n_i, x> = d_i
+    outer = np.stack([nx * nx, nx * ny, ny * ny])   # n n^T, upper triangle
     c = c0.copy()
     for _ in range(iters):
-        r = np.sum(n * (c - p), axis=1)
-        wi = w / (1.0 + (r / scale) ** 2)
-        M = (wi[:, None, None] * n[:, :, None] * n[:, None, :]).sum(0)
-        b = (wi[:, None] * n * np.sum(n * p, axis=1)[:, None]).sum(0)
-        lam = 1e-3 * max(np.trace(M), 1e-9)
-        c_new = np.linalg.solve(M + lam * np.eye(2), b + lam * c0)
+        wi = w / (1.0 + ((nx * c[0] + ny * c[1] - d) / scale) ** 2)
+        mxx, mxy, myy = outer @ wi
+        bx, by = (wi * d) @ np.stack([nx, ny], axis=1)
+        lam = 1e-3 * max(mxx + myy, 1e-9)
+        M = np.array([[mxx + lam, mxy], [mxy, myy + lam]])
+        c_new = np.linalg.solve(M, np.array([bx, by]) + lam * c0)
         if np.hypot(*(c_new - c)) < 1e-3:
             c = c_new
             break

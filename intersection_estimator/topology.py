@@ -25,7 +25,7 @@ from .model import Arm, Intersection
 from .moves import pack_state, unpack_state
 from .observations import Detections
 from .preprocess import (PreprocessConfig, initial_arm_angles, initial_center, initial_lanes,
-                         preprocess, seed_lines)
+                         preprocess, radar_rows, seed_lines)
 from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
 
 __all__ = ['TopologyConfig', 'TopologyEstimator', 'warmup']
@@ -305,6 +305,7 @@ class TopologyEstimator:
     def reset(self) -> None:
         """Forget observations and chain."""
         self._dets = Detections.empty()
+        self._radar = None                     # radar_rows(self._dets), made on first use
         self._obs = ObservationSet.empty()
         self._chain: Chain | None = None
         self._pp_center = None
@@ -320,6 +321,7 @@ class TopologyEstimator:
     def set_observations(self, dets: Detections) -> None:
         """Replace the observation window; keep the chain (warm start, re-heated)."""
         self._dets = dets.finite()
+        self._radar = None
         self._since_data = 0
         if self._chain is None:
             self._initialise()
@@ -404,7 +406,7 @@ class TopologyEstimator:
                                     peak_frac=cfg.init_peak_frac)
         angles = self._complete_arms(angles, o, w)
         c0 = c
-        obs = preprocess(self._dets, c, self._pcfg, angles)
+        obs = self._preprocessed(c, angles)
         c, guess = initial_lanes(obs, c, angles, cfg.lane_width, cfg.max_lanes, cfg.gap_max,
                                  cfg.traffic_side, width_range=(cfg.lane_width_min,
                                                                 cfg.lane_width_max)
@@ -563,7 +565,7 @@ class TopologyEstimator:
         if obs is None:
             S = self._chain.best_S
             angles = S[K.HDR:K.HDR + int(S[2]) * K.STRIDE:K.STRIDE].copy()
-            obs, obs_center = preprocess(self._dets, center, self._pcfg, angles), center
+            obs, obs_center = self._preprocessed(center, angles), center
         self._obs = obs
         self._pp_center = np.asarray(obs_center, float).copy()
         self.preprocess_count += 1
@@ -579,6 +581,11 @@ class TopologyEstimator:
             c.best_lpost = c.ll + c.lp
         self._ref_best = c.best_lpost
         self._last_improve = c.step
+
+    def _preprocessed(self, center, angles):
+        if self._radar is None:
+            self._radar = radar_rows(self._dets, self._pcfg)
+        return preprocess(self._dets, center, self._pcfg, angles, self._radar)
 
     def _score(self, S, C=None):
         if C is None:
