@@ -699,15 +699,16 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
         other[i] = m
     # observations this arm can explain at all (others add a constant to every candidate)
     reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX]
-    rel = np.empty(nobs, np.int64)
-    nrel = 0
+    # ... per driving direction: rel[side, :nrel[side]] (side 0 entering)
+    rel = np.empty((2, nobs), np.int64)
+    nrel = np.zeros(2, np.int64)
+    lo0 = np.empty(nobs)
     for i in range(nobs):
         if base[i] < cut and abs(tl[i]) < reach + math.sqrt(cut / isp[i]):
-            rel[nrel] = i
-            nrel += 1
-    lo0 = np.empty(nobs)
-    for r in range(nrel):
-        lo0[rel[r]] = math.log(other[rel[r]] + floor)
+            side = 0 if dd[i] > 0.0 else 1
+            rel[side, nrel[side]] = i
+            nrel[side] += 1
+            lo0[i] = math.log(other[i] + floor)
     acc = np.empty(hi + 1)
     invn = np.empty(hi + 1)
     for nl in range(1, hi + 1):
@@ -727,7 +728,6 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             w = widths[wi] if wi < nw - 1 else S[i0 + WID]
             tot = 0.0
             for side in range(2):
-                dsel = 1.0 if side == 0 else -1.0
                 sbest = -np.inf
                 sn = lo
                 n_lo = lo
@@ -737,48 +737,45 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                     n_hi = n_lo
                 for nl in range(n_lo, n_hi + 1):
                     acc[nl] = logPn[nl]
-                for r in range(nrel):
-                    i = rel[r]
-                    if dd[i] != dsel:
-                        continue
+                for r in range(nrel[side]):
+                    i = rel[side, r]
                     # log-density relative to "no lane of this arm explains it" (the same
                     # for every candidate, so left out): 0 unless this arm beats the others
                     q = tl[i] - 0.5 * g
                     kf = math.floor(q / w)
                     if kf < 0.0:
                         kf = 0.0
-                    last = -1.0
-                    ex = 0.0
-                    cs = 0.0
-                    for nl in range(n_lo, n_hi + 1):
-                        if lane_sum:   # sum over lanes 0..nl-1 (closest must be within cut)
-                            if last < 0.0:
-                                for jl in range(nl):
-                                    dj = q - (jl + 0.5) * w
-                                    ej = base[i] + isp[i] * dj * dj
-                                    if ej < cut:
-                                        cs += math.exp(-ej)
-                            else:
-                                dj = q - (nl - 0.5) * w
-                                ej = base[i] + isp[i] * dj * dj
-                                if ej < cut:
-                                    cs += math.exp(-ej)
-                            last = 1.0
-                            kk = kf if kf < nl - 1.0 else nl - 1.0
-                            dl = q - (kk + 0.5) * w
-                            if base[i] + isp[i] * dl * dl >= cut:
-                                continue
-                            v = cs * invn[nl]
-                        else:
+                    if not lane_sum:
+                        # closest lane: kf while it exists, else the outermost one, whose
+                        # distance grows as lanes are taken away -- count down and stop at
+                        # the first lane count that leaves it beyond the cut
+                        last = -1.0
+                        for nl in range(n_hi, n_lo - 1, -1):
                             kk = kf if kf < nl - 1.0 else nl - 1.0
                             if kk != last:
                                 last = kk
                                 dl = q - (kk + 0.5) * w
                                 e = base[i] + isp[i] * dl * dl
-                                ex = math.exp(-e) if e < cut else 0.0
-                            if ex == 0.0:
-                                continue
+                                if e >= cut:
+                                    break
+                                ex = math.exp(-e)
                             v = ex * invn[nl]
+                            if v > other[i]:
+                                acc[nl] += wts[i] * (math.log(v + floor) - lo0[i])
+                        continue
+                    # sum over lanes 0..nl-1 (the closest must be within the cut)
+                    cs = 0.0
+                    for nl in range(n_lo, n_hi + 1):
+                        for jl in range(0 if nl == n_lo else nl - 1, nl):   # the new lanes
+                            dj = q - (jl + 0.5) * w
+                            ej = base[i] + isp[i] * dj * dj
+                            if ej < cut:
+                                cs += math.exp(-ej)
+                        kk = kf if kf < nl - 1.0 else nl - 1.0
+                        dl = q - (kk + 0.5) * w
+                        if base[i] + isp[i] * dl * dl >= cut:
+                            continue
+                        v = cs * invn[nl]
                         if v > other[i]:
                             acc[nl] += wts[i] * (math.log(v + floor) - lo0[i])
                 for nl in range(n_lo, n_hi + 1):
