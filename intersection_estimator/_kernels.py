@@ -30,8 +30,8 @@ STATE_LEN = HDR + STRIDE * MAXA
  P_ROT, P_SHIFT, P_GAP_STEP, P_W_STEP, P_SPLIT_SPAN,
  P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE,
  P_FLOOR, P_TRAFFIC, P_D2_CUT, P_SAMPLE_W, P_W_DEFAULT,
- P_LANE_NORM, P_FINE_P, P_FINE_SCALE, P_LANE_SUM) = range(27)
-NPARAM = 27
+ P_LANE_NORM, P_FINE_P, P_FINE_SCALE, P_LANE_SUM, P_FOCUS, P_FOCUS_P) = range(29)
+NPARAM = 29
 
 ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH = range(7)
 MOVE_NAMES = ('rotate', 'shift', 'gap', 'add_arm', 'remove_arm', 'lane', 'width')
@@ -153,10 +153,19 @@ def _sample_discrete(cum):
 
 
 @njit(cache=True)
-def move_rotate(S, S2, P):
-    """Rotate a random arm by U[-rot, rot] (symmetric)."""
+def _pick_arm(S, P):
+    """The arm a move changes: slot ``P_FOCUS`` with probability ``P_FOCUS_P`` (when >= 0),
+    otherwise uniform. The choice does not depend on the state, so moves stay symmetric."""
     n = int(S[2])
-    k = int(np.random.random() * n)
+    if P[P_FOCUS] >= 0.0 and P[P_FOCUS] < n and np.random.random() < P[P_FOCUS_P]:
+        return int(P[P_FOCUS])
+    return int(np.random.random() * n)
+
+
+@njit(cache=True)
+def move_rotate(S, S2, P):
+    """Rotate an arm (:func:`_pick_arm`) by U[-rot, rot] (symmetric)."""
+    k = _pick_arm(S, P)
     i = HDR + k * STRIDE
     S2[i] = wrap(S[i] + (2.0 * np.random.random() - 1.0) * P[P_ROT] * _step(P))
     return separation_ok(S2, k, P[P_MIN_SEP]), 0.0, k
@@ -174,9 +183,9 @@ def move_shift(S, S2, P):
 
 @njit(cache=True)
 def _perturb_arm(S, S2, P, field, step, lo, hi):
-    """Change ``field`` of a random arm by U[-step, step] (symmetric); valid in [lo, hi]."""
-    n = int(S[2])
-    k = int(np.random.random() * n)
+    """Change ``field`` of an arm (:func:`_pick_arm`) by U[-step, step] (symmetric); valid
+    in [lo, hi]."""
+    k = _pick_arm(S, P)
     i = HDR + k * STRIDE + field
     v = S[i] + (2.0 * np.random.random() - 1.0) * step * _step(P)
     S2[i] = v

@@ -121,7 +121,7 @@ class TopologyConfig:
     reheat_fraction: float = 0.3         # on new data: back to this share of the schedule
     descent_rounds: int = 2              # end of the schedule: greedy descent over lane-count
                                          # changes and arm removals, each followed by
-    descent_samples: int = 400           # ... this many continuous moves at descent_temp
+    descent_samples: int = 250           # ... this many continuous moves at descent_temp
     descent_temp: float = 1e-3           # (0 rounds: off; beyond the paper, see _descend)
     descent_screen: float = 4.5          # lane candidates scoring this many nats below the
                                          # best state so far before their moves are dropped
@@ -131,6 +131,8 @@ class TopologyConfig:
                                          # (raw, 300 cases, 72 improving candidates: none
                                          # lost, 72 % of the moves saved; 3.5 x (share left):
                                          # one lost, 42 % saved)
+    descent_focus: float = 0.8           # share of a lane candidate's arm moves that go to
+                                         # the arm whose lane counts changed
     descent_top: int = 0                 # ... and only the best this many lane candidates
                                          # (0: all) get the moves (raw, 1000 cases, before
                                          # the staged screen: all 84.9 %, 4: 82.9 %)
@@ -213,6 +215,7 @@ class TopologyConfig:
         need('descent_temp', 0 < self.descent_temp <= 1, '(0, 1]')
         need('descent_screen', 0 <= self.descent_screen, '[0, inf)')
         need('descent_prune', 0 <= self.descent_prune, '[0, inf)')
+        need('descent_focus', 0 <= self.descent_focus <= 1, '[0, 1]')
         need('descent_top', 0 <= self.descent_top <= 1000, '[0, 1000]')
         need('chunk', 1 <= self.chunk <= 10 ** 7, '[1, 1e7]')
         need('converge_window', 1 <= self.converge_window, '[1, inf)')
@@ -251,6 +254,7 @@ class TopologyConfig:
         P[K.P_W_DEFAULT] = self.lane_width
         P[K.P_LANE_NORM] = self.lane_norm
         P[K.P_LANE_SUM] = 1.0 if self.lane_sum else 0.0
+        P[K.P_FOCUS] = -1.0
         P[K.P_FINE_P] = self.fine_step_prob
         P[K.P_FINE_SCALE] = self.fine_step_scale
         return P
@@ -466,14 +470,14 @@ class TopologyEstimator:
                     continue
                 S2, L2 = self._descent_prepare(S2, k)
                 if L2 >= L - cfg.descent_screen:
-                    lanes.append((L2, len(lanes), S2))
+                    lanes.append((L2, len(lanes), S2, k))
             lanes.sort(key=lambda x: (-x[0], x[1]))
             best = None
             top = lanes[:cfg.descent_top] if cfg.descent_top > 0 else lanes
-            for S2 in [x[2] for x in top] + removals:
+            for S2, k in [(x[2], x[3]) for x in top] + [(S2, -1) for S2 in removals]:
                 if time.perf_counter() >= self._deadline:
                     break
-                S3, L3 = self._descent_run(S2, L)
+                S3, L3 = self._descent_run(S2, L, k)
                 if L3 > L + 1e-9:
                     best, L = S3, L3
             if best is None:
@@ -511,8 +515,9 @@ class TopologyEstimator:
         ll, _ = self._score(S, C)
         return S, ll + float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
 
-    def _descent_run(self, S, ref=None):
-        """``descent_samples`` continuous moves at ``descent_temp`` from ``S``: (best, lpost).
+    def _descent_run(self, S, ref=None, focus=-1):
+        """``descent_samples`` continuous moves at ``descent_temp`` from ``S``: (best, lpost);
+        with ``focus`` >= 0 a share ``descent_focus`` of the arm moves goes to that arm.
 
         With ``ref`` (the best log posterior so far) the moves run in stages ending at
         :data:`DESCENT_CHECKS` of them, and stop after a stage whose best is more than
@@ -524,13 +529,17 @@ class TopologyEstimator:
         lp = float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
         ch = Chain(S=S.copy(), C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
                    stats=np.zeros(2 * len(K.MOVE_NAMES), np.int64))
+        P = t.P_polish
+        if focus >= 0:
+            P = P.copy()
+            P[K.P_FOCUS], P[K.P_FOCUS_P] = focus, cfg.descent_focus
         ends = [m] if ref is None else sorted({max(1, round(m * f)) for f in DESCENT_CHECKS} | {m})
         for end in ends:
             n = end - ch.step
             if n <= 0:
                 continue
             advance(ch, n, np.full(n, cfg.descent_temp), int(self._rng.integers(0, 2 ** 31 - 1)),
-                    t.P_polish, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn, self._obs)
+                    P, t.logPA, t.logPn, t.arm_const, t.logqn, t.cumqn, self._obs)
             self.samples_drawn += n
             if end < m and ch.best_lpost < ref - cfg.descent_prune * (1.0 - end / m) ** 2:
                 break

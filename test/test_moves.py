@@ -232,3 +232,24 @@ def test_move_frequencies_follow_algorithm_1():
                   CFG.p_lane, CFG.p_width])
     p = p / p.sum()
     assert np.all(np.abs(counts - p) < 0.015), (counts, p)
+
+
+@SET
+@given(states(), st.sampled_from([K.ROTATE, K.CHANGE_GAP, K.WIDTH]), st.integers(0, 2 ** 31 - 2),
+       st.integers(0, 7))
+def test_focused_arm_moves_change_the_focus_arm_and_stay_symmetric(S, kind, seed, focus):
+    """The descent's focus (``P_FOCUS``): with probability 1 every arm move picks that slot
+    (slots beyond the arm count fall back to a uniform pick); the arm choice never depends
+    on the state, so the move keeps Hastings factor 0."""
+    n = int(S[2])
+    Pf = P.copy()
+    Pf[K.P_FOCUS], Pf[K.P_FOCUS_P] = focus, 1.0
+    S2 = np.empty_like(S)
+    ok, lq, k = K.propose_kind(S, S2, Pf, TAB.logqn, TAB.cumqn, kind, seed)
+    assert lq == 0.0
+    if focus < n:
+        assert k == focus
+        changed = np.flatnonzero(S2 != S)
+        assert all(K.HDR + focus * K.STRIDE <= i < K.HDR + (focus + 1) * K.STRIDE for i in changed)
+    else:
+        assert 0 <= k < n
