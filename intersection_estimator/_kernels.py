@@ -402,6 +402,18 @@ def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa):
     return s, t, d, e
 
 
+@njit(cache=True, fastmath=True, inline='always')
+def _arm_geometry(S, k, P):
+    """Arm ``k`` of state ``S`` for the likelihood: center, unit direction, half gap, lane
+    counts and width, traffic side, lane-count normalisations (entering, leaving)."""
+    i0 = HDR + k * STRIDE
+    a = S[i0 + ANG]
+    nin = S[i0 + NIN]
+    nout = S[i0 + NOUT]
+    return (S[0], S[1], math.cos(a), math.sin(a), 0.5 * S[i0 + GAP], nin, nout, S[i0 + WID],
+            P[P_TRAFFIC], nin ** -P[P_LANE_NORM], nout ** -P[P_LANE_NORM])
+
+
 @njit(cache=True, fastmath=True)
 def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """Unnormalised density of every observation under its best lane of arm ``k``.
@@ -417,19 +429,7 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     if P[P_LANE_SUM] > 0.0:
         _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out)
         return
-    cx = S[0]
-    cy = S[1]
-    i0 = HDR + k * STRIDE
-    a = S[i0 + ANG]
-    hg = 0.5 * S[i0 + GAP]
-    nin = S[i0 + NIN]
-    nout = S[i0 + NOUT]
-    w = S[i0 + WID]
-    ux = math.cos(a)
-    uy = math.sin(a)
-    ts = P[P_TRAFFIC]
-    inv_n_in = nin ** -P[P_LANE_NORM]
-    inv_n_out = nout ** -P[P_LANE_NORM]
+    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)
     n = ox.shape[0]
     energy = np.empty(n)
     # pass 1, branch-free (vectorises): energy of the closest lane and the lane-count
@@ -458,20 +458,8 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
 @njit(cache=True, fastmath=True)
 def _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """:func:`arm_column` with the sum over the lanes of that direction (``P_LANE_SUM``)."""
-    cx = S[0]
-    cy = S[1]
-    i0 = HDR + k * STRIDE
-    a = S[i0 + ANG]
-    hg = 0.5 * S[i0 + GAP]
-    nin = S[i0 + NIN]
-    nout = S[i0 + NOUT]
-    w = S[i0 + WID]
-    ux = math.cos(a)
-    uy = math.sin(a)
+    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)
     cut = P[P_D2_CUT]
-    ts = P[P_TRAFFIC]
-    inv_n_in = nin ** -P[P_LANE_NORM]
-    inv_n_out = nout ** -P[P_LANE_NORM]
     for i in range(ox.shape[0]):
         s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
         if e >= cut:
@@ -1049,11 +1037,11 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
     # unique voxels: count and sums
     uk, slot = _voxel_slots(key, arm, sb, tb, cls)
     m = uk.shape[0]
-    cnt = np.zeros(n)
-    sx = np.zeros(n)
-    sy = np.zeros(n)
-    svx = np.zeros(n)
-    svy = np.zeros(n)
+    cnt = np.zeros(m)
+    sx = np.zeros(m)
+    sy = np.zeros(m)
+    svx = np.zeros(m)
+    svy = np.zeros(m)
     for i in range(n):
         j = slot[i]
         cnt[j] += 1.0

@@ -511,8 +511,10 @@ class TopologyEstimator:
         t = self._t
         C = np.zeros((K.MAXA, len(self._obs)))
         self._score(S, C)
-        K.refit_arm(S, k, t.P, t.logPn, *self._obs.kernel_args(), C, t.gaps, t.widths, True)
-        ll, _ = self._score(S, C)
+        args = self._obs.kernel_args()
+        K.refit_arm(S, k, t.P, t.logPn, *args, C, t.gaps, t.widths, True)
+        # refit_arm left C the columns of the refitted S: combine them, no second scoring
+        ll = float(K.combine(C, int(S[2]), -1, C[0], False, args[-1], t.P[K.P_FLOOR]))
         return S, ll + float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
 
     def _descent_run(self, S, ref=None, focus=-1):
