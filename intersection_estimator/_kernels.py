@@ -1103,6 +1103,40 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
     return ox[:g], oy[:g], oc[:g], ow[:g], ovx[:g], ovy[:g]
 
 
+@njit(cache=True, nogil=True)
+def radar_voxels(x, y, stamp, dop, sx, sy, cx, cy, angles, reach, min_cos, min_dop,
+                 keep_unknown, rays, length, width, straight, merge, gap, min_dist):
+    """Radar rows -> arm-aligned voxels in one compiled pass (``preprocess.radar_observations``
+    with arms known): :func:`radar_frame`, then :func:`arm_voxels` of the rows on an arm
+    and of those along ``rays``, then voxels closer than ``min_dist`` to the center dropped.
+
+    Returns mean x, mean y, direction (+1 entering, -1 leaving, 0 unknown), count in
+    passages."""
+    arm, s, t, group, cls = radar_frame(x, y, dop, sx, sy, cx, cy, angles, reach, min_cos,
+                                        min_dop, keep_unknown, rays)
+    ia = np.flatnonzero(group == 1)
+    ib = np.flatnonzero(group == 2)
+    za = np.zeros(ia.shape[0])
+    zb = np.zeros(ib.shape[0])
+    ax, ay, ac, aw, _, _ = arm_voxels(x[ia], y[ia], cls[ia], arm[ia], s[ia], t[ia], stamp[ia],
+                                      za, za, length, width, straight, merge, gap)
+    bx, by, bc, bw, _, _ = arm_voxels(x[ib], y[ib], cls[ib], arm[ib], s[ib], t[ib], stamp[ib],
+                                      zb, zb, length, width, straight, merge, gap)
+    mx = np.concatenate((ax, bx))
+    my = np.concatenate((ay, by))
+    mc = np.concatenate((ac, bc))
+    mw = np.concatenate((aw, bw))
+    m = 0
+    for j in range(mx.shape[0]):
+        if min_dist <= 0.0 or math.hypot(mx[j] - cx, my[j] - cy) >= min_dist:
+            mx[m] = mx[j]
+            my[m] = my[j]
+            mw[m] = mw[j]
+            mc[m] = 1 if mc[j] == 1 else (-1 if mc[j] == 0 else 0)
+            m += 1
+    return mx[:m], my[:m], mc[:m].astype(np.float64), mw[:m]
+
+
 @njit(cache=True, nogil=True, inline='always')
 def _nearest_ray(px, py, ux, uy):
     """Among the rays (from the origin, unit directions ``ux, uy``) that ``(px, py)`` lies

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import operator
 
 import numpy as np
 
@@ -98,9 +99,15 @@ class ObservationSet:
         return ObservationSet(*[np.ascontiguousarray(getattr(self, f)[keep]) for f in FIELDS])
 
     def kernel_args(self):
-        """(x, y, hx, hy, has_o, d, 0.5/sigma^2, 0.5/sigma_ang^2, w) for the kernels."""
-        return (self.x, self.y, self.hx, self.hy, self.has_o, self.d,
-                0.5 / self.sigma ** 2, 0.5 / self.sigma_ang ** 2, self.w)
+        """(x, y, hx, hy, has_o, d, 0.5/sigma^2, 0.5/sigma_ang^2, w) for the kernels; made
+        once (the sampler asks for them on every call; the arrays are not changed in place)."""
+        key = (self.x, self.y, self.hx, self.hy, self.has_o, self.d, self.sigma,
+               self.sigma_ang, self.w)
+        cached = self.__dict__.get('_args')
+        if cached is None or not all(map(operator.is_, cached[0], key)):
+            cached = key, key[:6] + (0.5 / self.sigma ** 2, 0.5 / self.sigma_ang ** 2, self.w)
+            self.__dict__['_args'] = cached
+        return cached[1]
 
 
 def log_likelihood(S: np.ndarray, obs: ObservationSet, P: np.ndarray) -> float:

@@ -83,6 +83,8 @@ class Detections:
 
     def finite(self) -> 'Detections':
         """Drop rows with a non-finite position or stamp."""
+        if np.isfinite(self.xy.sum()) and np.isfinite(self.t.sum()):   # fast path: all finite
+            return self
         ok = np.isfinite(self.xy).all(axis=1) & np.isfinite(self.t)
         return self if ok.all() else self.subset(ok)
 

@@ -26,7 +26,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._kernels import arm_voxels, local_pca, nearest_rays, radar_frame, split_tracks
+from ._kernels import (arm_voxels, local_pca, nearest_rays, radar_frame, radar_voxels,
+                       split_tracks)
 from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
@@ -208,35 +209,41 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
     lateral band on both sides along the arm are dropped -- they are not on a straight
     lane (turning vehicles inside the box, isolated clutter). Rows on no current arm
     (farther than ``arm_reach`` from every arm's axis) are voxelised along :data:`RAYS`
-    from the center, so that an arm the chain has not found yet keeps its data. The frame
-    of every row is computed in one compiled pass (:func:`_kernels.radar_frame`).
+    from the center, so that an arm the chain has not found yet keeps its data. Frame,
+    voxels and the near-center drop run in one compiled pass (:func:`_kernels.radar_voxels`).
     Without arms: square voxels.
     """
     rows = radar_rows(dets, cfg) if rows is None else rows
     if not len(rows.t):
         return ObservationSet.empty()
     c = np.asarray(center, float)
-    xy, ts = rows.xy, rows.t
-    known = _arms_known(arm_angles, cfg)
-    angles = np.asarray(arm_angles if known else [], float)
-    arm, s_arm, t_arm, group, cls = radar_frame(
-        rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y,
-        float(c[0]), float(c[1]), angles, float(cfg.arm_reach), float(cfg.min_radial_cos),
-        float(cfg.min_doppler), bool(cfg.keep_unknown_direction), RAYS if known else np.zeros(0))
-    a, b = group == 1, group == 2
-    va = _arm_voxels(xy[a], cls[a], arm[a], s_arm[a], t_arm[a], ts[a], cfg)
-    if known:    # rows on no current arm: along rays (arm not found yet)
-        vb = _arm_voxels(xy[b], cls[b], arm[b], s_arm[b], t_arm[b], ts[b], cfg)
-    else:
-        vb = voxelise(xy[b], cls[b], cfg.voxel_size, t=ts[b], gap=cfg.passage_gap)[:3]
-    vxy, vcls, cnt = (np.concatenate([p, q]) for p, q in zip(va, vb))
+    if _arms_known(arm_angles, cfg):
+        vx, vy, dcls, cnt = radar_voxels(
+            rows.x, rows.y, rows.t, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]),
+            float(c[1]), np.asarray(arm_angles, float), float(cfg.arm_reach),
+            float(cfg.min_radial_cos), float(cfg.min_doppler), bool(cfg.keep_unknown_direction),
+            RAYS, float(cfg.voxel_length), float(cfg.voxel_width), bool(cfg.straight_run),
+            int(cfg.voxel_merge), float(cfg.passage_gap), float(cfg.min_center_dist))
+        return _radar_set(vx, vy, dcls, cnt, cfg)
+    _, _, _, group, cls = radar_frame(
+        rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]), float(c[1]),
+        np.zeros(0), float(cfg.arm_reach), float(cfg.min_radial_cos), float(cfg.min_doppler),
+        bool(cfg.keep_unknown_direction), np.zeros(0))
+    b = group == 2
+    vxy, vcls, cnt = voxelise(rows.xy[b], cls[b], cfg.voxel_size, t=rows.t[b],
+                              gap=cfg.passage_gap)[:3]
     dcls = np.select([vcls == 1, vcls == 0], [1.0, -1.0], 0.0)
-    n = len(vxy)
-    z = np.zeros(n)
-    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), z, z.copy(), np.zeros(n, np.bool_),
-                         dcls, cfg.weight_scale * cnt ** cfg.weight_power,
-                         np.full(n, cfg.sigma_point), np.full(n, 1.0), cnt)
+    obs = _radar_set(vxy[:, 0].copy(), vxy[:, 1].copy(), dcls, cnt, cfg)
     return _drop_near_center(obs, c, cfg)
+
+
+def _radar_set(x, y, dcls, cnt, cfg: PreprocessConfig) -> ObservationSet:
+    """Radar voxels as observations: no orientation, direction class, weight from count."""
+    n = len(x)
+    z = np.zeros(n)
+    return ObservationSet(x, y, z, z.copy(), np.zeros(n, np.bool_), dcls,
+                          cfg.weight_scale * cnt ** cfg.weight_power,
+                          np.full(n, cfg.sigma_point), np.full(n, 1.0), cnt)
 
 
 def _arms_known(arm_angles, cfg: PreprocessConfig) -> bool:

@@ -5,12 +5,13 @@ import math
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
+from intersection_estimator._kernels import radar_frame
 from intersection_estimator.observations import Detections
-from intersection_estimator.preprocess import (PreprocessConfig, _arm_voxels,
+from intersection_estimator.preprocess import (RAYS, PreprocessConfig, _arm_voxels,
                                                heading_observations, initial_arm_angles, initial_center,
                                                initial_lanes, preprocess, radar_observations,
-                                               passages, seed_lines, tracked_observations,
-                                               voxelise)
+                                               radar_rows, passages, seed_lines,
+                                               tracked_observations, voxelise)
 
 from topology_scenes import easy_intersection, scene
 
@@ -251,3 +252,31 @@ def test_compiled_arm_voxels_equal_the_numpy_reference(seed, merge, straight, ga
     assert len(got) == len(want)
     for g, w in zip(got, want):
         np.testing.assert_allclose(g, w, rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 50), st.floats(-3.0, 3.0), st.floats(-0.1, 0.1), st.sampled_from([0.0, 20.0]))
+def test_fused_radar_voxels_equal_frame_then_voxels(seed, shift, turn, min_dist):
+    """radar_observations' single compiled pass == radar_frame, _arm_voxels of the rows on
+    an arm and of those along rays, near-center drop (the steps it fuses)."""
+    inter = easy_intersection(3 + seed % 2, lanes=((1, 2),) * (3 + seed % 2))
+    dets = scene(inter, 'raw', seed=seed)
+    c = np.asarray(inter.center) + shift
+    angles = [a.angle + turn for a in inter.arms][:-1] if seed % 3 == 0 else \
+        [a.angle + turn for a in inter.arms]
+    cfg = PreprocessConfig(min_center_dist=min_dist)
+    got = radar_observations(dets, c, cfg, angles)
+    rows = radar_rows(dets, cfg)
+    arm, s, t, group, cls = radar_frame(
+        rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]), float(c[1]),
+        np.asarray(angles, float), cfg.arm_reach, cfg.min_radial_cos, cfg.min_doppler,
+        cfg.keep_unknown_direction, RAYS)
+    parts = [_arm_voxels(rows.xy[g], cls[g], arm[g], s[g], t[g], rows.t[g], cfg)
+             for g in (group == 1, group == 2)]
+    xy, vc, cnt = (np.concatenate(p) for p in zip(*parts))
+    keep = np.hypot(xy[:, 0] - c[0], xy[:, 1] - c[1]) >= min_dist
+    assert len(got) == keep.sum() > 0
+    np.testing.assert_array_equal(got.x, xy[keep, 0])
+    np.testing.assert_array_equal(got.y, xy[keep, 1])
+    np.testing.assert_array_equal(got.d, np.select([vc == 1, vc == 0], [1.0, -1.0], 0.0)[keep])
+    np.testing.assert_array_equal(got.passages, cnt[keep])
