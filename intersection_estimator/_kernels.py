@@ -15,6 +15,7 @@ Parameter vector ``P``: see the ``P_*`` indices (filled by ``topology.TopologyCo
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -655,8 +656,33 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
 
 # ----------------------------------------------------------------------------- arm refit
 
-@njit(cache=True, nogil=True)
-def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths,
+#: Knots per unit of the table of F(x) = log(exp(-x) + floor) that :func:`refit_arm`
+#: interpolates (cubic Hermite: |error| < 1e-9, no exp / log in its inner loop).
+LOG_FLOOR_INV_STEP = 32.0
+
+
+@functools.lru_cache(maxsize=16)
+def log_floor_table(floor: float, xmax: float) -> np.ndarray:
+    """Cubic pieces (rows: knot j, columns: coefficients of u^0..u^3, u in [0, 1)) of
+    F(x) = log(exp(-x) + floor) on [0, xmax]: the log-density of an observation at
+    energy x plus the clutter floor."""
+    h = 1.0 / LOG_FLOOR_INV_STEP
+    x = np.arange(int(math.ceil(xmax / h)) + 3) * h
+    ex = np.exp(-x)
+    f = np.log(ex + floor)
+    d = -ex / (ex + floor) * h
+    f0, f1, d0, d1 = f[:-1], f[1:], d[:-1], d[1:]
+    T = np.stack([f0, d0, 3.0 * (f1 - f0) - 2.0 * d0 - d1, 2.0 * (f0 - f1) + d0 + d1], axis=1)
+    T.setflags(write=False)
+    return T
+
+
+#: fastmath without 'nnan' / 'ninf': refit_arm compares with infinite sentinels.
+FAST_FINITE = {'nsz', 'arcp', 'contract', 'afn', 'reassoc'}
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
+def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths, FT,
               fixed_counts=False):
     """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed
     (with ``fixed_counts``: best gap and width for the lane counts in ``S``).
@@ -665,7 +691,10 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
     paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
     each, the lane counts per direction are chosen independently (the likelihood of
     entering and leaving observations separates given the other arms' columns). Writes
-    the best into ``S`` and arm ``k``'s column into ``C``; returns the posterior gain.
+    the best into ``S`` and arm ``k``'s column into ``C``; returns the posterior gain,
+    never negative: the choice is scored exactly and kept only if it is no worse. The
+    search reads log-densities from ``FT`` (:func:`log_floor_table`), the closest lane
+    only; the sum over lanes (``P_LANE_SUM``) takes exact logarithms.
     """
     n = int(S[2])
     nobs = ox.shape[0]
@@ -680,6 +709,8 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
     floor = P[P_FLOOR]
     lo = int(P[P_MIN_LANES])
     hi = int(P[P_MAX_LANES])
+    if FT.shape[0] < (cut + beta * math.log(hi)) * LOG_FLOOR_INV_STEP + 1.0:
+        raise ValueError('refit_arm: log_floor_table too short for P_D2_CUT / lanes')
     tl = np.empty(nobs)
     base = np.empty(nobs)
     dd = np.empty(nobs)
@@ -694,22 +725,36 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             if j != k and C[j, i] > m:
                 m = C[j, i]
         other[i] = m
-    # observations this arm can explain at all (others add a constant to every candidate)
+    # observations this arm can explain at all (others add a constant to every candidate),
+    # packed per driving direction (side 0 entering) in R[side, :, :nrel[side]]: lateral
+    # offset, base energy, 1/(2 sigma^2), weight, the other arms' best density o,
+    # log(o + floor), the energy cut (beyond it this arm cannot beat o: the closest
+    # lane's density exp(-e) / n**beta <= exp(-e)) and -log(o)
     reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX]
-    # ... per driving direction: rel[side, :nrel[side]] (side 0 entering)
-    rel = np.empty((2, nobs), np.int64)
+    R = np.empty((2, 8, nobs))
     nrel = np.zeros(2, np.int64)
-    lo0 = np.empty(nobs)
     for i in range(nobs):
-        if base[i] < cut and abs(tl[i]) < reach + math.sqrt(cut / isp[i]):
+        ci = cut
+        if other[i] > 0.0 and not lane_sum:
+            ci = min(cut, -math.log(other[i]))
+        if base[i] < ci and abs(tl[i]) < reach + math.sqrt(ci / isp[i]):
             side = 0 if dd[i] > 0.0 else 1
-            rel[side, nrel[side]] = i
+            r = nrel[side]
+            R[side, 0, r] = tl[i]
+            R[side, 1, r] = base[i]
+            R[side, 2, r] = isp[i]
+            R[side, 3, r] = wts[i]
+            R[side, 4, r] = other[i]
+            R[side, 5, r] = math.log(other[i] + floor)
+            R[side, 6, r] = ci
+            R[side, 7, r] = -math.log(other[i]) if other[i] > 0.0 else np.inf
             nrel[side] += 1
-            lo0[i] = math.log(other[i] + floor)
     acc = np.empty(hi + 1)
     invn = np.empty(hi + 1)
+    blog = np.empty(hi + 1)
     for nl in range(1, hi + 1):
         invn[nl] = float(nl) ** -beta
+        blog[nl] = beta * math.log(float(nl))
     ng = gaps.shape[0] + 1
     nw = widths.shape[0] + 1
     best = -np.inf
@@ -734,11 +779,18 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                     n_hi = n_lo
                 for nl in range(n_lo, n_hi + 1):
                     acc[nl] = logPn[nl]
+                Rt = R[side, 0]
+                Rb = R[side, 1]
+                Ri = R[side, 2]
+                Rw = R[side, 3]
+                Ro = R[side, 4]
+                Rl = R[side, 5]
+                Rc = R[side, 6]
+                Rx = R[side, 7]
                 for r in range(nrel[side]):
-                    i = rel[side, r]
                     # log-density relative to "no lane of this arm explains it" (the same
                     # for every candidate, so left out): 0 unless this arm beats the others
-                    q = tl[i] - 0.5 * g
+                    q = Rt[r] - 0.5 * g
                     kf = math.floor(q / w)
                     if kf < 0.0:
                         kf = 0.0
@@ -752,29 +804,34 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                             if kk != last:
                                 last = kk
                                 dl = q - (kk + 0.5) * w
-                                e = base[i] + isp[i] * dl * dl
-                                if e >= cut:
+                                e = Rb[r] + Ri[r] * dl * dl
+                                if e >= Rc[r]:
                                     break
-                                ex = math.exp(-e)
-                            v = ex * invn[nl]
-                            if v > other[i]:
-                                acc[nl] += wts[i] * (math.log(v + floor) - lo0[i])
+                            # density exp(-x), x = e + beta log(nl): beats o iff x < -log(o);
+                            # its log-density log(exp(-x) + floor) from the table
+                            x = e + blog[nl]
+                            if x < Rx[r]:
+                                tj = x * LOG_FLOOR_INV_STEP
+                                j = int(tj)
+                                u = tj - j
+                                f = FT[j, 0] + u * (FT[j, 1] + u * (FT[j, 2] + u * FT[j, 3]))
+                                acc[nl] += Rw[r] * (f - Rl[r])
                         continue
                     # sum over lanes 0..nl-1 (the closest must be within the cut)
                     cs = 0.0
                     for nl in range(n_lo, n_hi + 1):
                         for jl in range(0 if nl == n_lo else nl - 1, nl):   # the new lanes
                             dj = q - (jl + 0.5) * w
-                            ej = base[i] + isp[i] * dj * dj
+                            ej = Rb[r] + Ri[r] * dj * dj
                             if ej < cut:
                                 cs += math.exp(-ej)
                         kk = kf if kf < nl - 1.0 else nl - 1.0
                         dl = q - (kk + 0.5) * w
-                        if base[i] + isp[i] * dl * dl >= cut:
+                        if Rb[r] + Ri[r] * dl * dl >= cut:
                             continue
                         v = cs * invn[nl]
-                        if v > other[i]:
-                            acc[nl] += wts[i] * (math.log(v + floor) - lo0[i])
+                        if v > Ro[r]:
+                            acc[nl] += Rw[r] * (math.log(v + floor) - Rl[r])
                 for nl in range(n_lo, n_hi + 1):
                     if acc[nl] > sbest:
                         sbest = acc[nl]

@@ -287,6 +287,8 @@ class _Tables:
                        if cfg.sample_width else np.zeros(0))
         self.arm_const = arm_log_const(cfg.gap_max, cfg.lane_width_min, cfg.lane_width_max,
                                        cfg.sample_width)
+        self.log_floor = K.log_floor_table(
+            cfg.clutter_floor, cfg.cut_sigma2 + cfg.lane_norm * math.log(cfg.max_lanes) + 1.0)
 
 
 def _as_rng(seed) -> np.random.Generator:
@@ -435,7 +437,7 @@ class TopologyEstimator:
         for _ in range(cfg.refit_sweeps):
             for k in range(int(c.S[2])):
                 K.refit_arm(c.S, k, self._t.P, self._t.logPn, *self._obs.kernel_args(), c.C,
-                            self._t.gaps, self._t.widths)
+                            self._t.gaps, self._t.widths, self._t.log_floor)
         c.ll, _ = self._score(c.S, c.C)
         c.lp = float(K.log_prior(c.S, self._t.logPA, self._t.logPn, self._t.arm_const))
         if c.ll + c.lp > c.best_lpost:
@@ -512,7 +514,7 @@ class TopologyEstimator:
         C = np.zeros((K.MAXA, len(self._obs)))
         self._score(S, C)
         args = self._obs.kernel_args()
-        K.refit_arm(S, k, t.P, t.logPn, *args, C, t.gaps, t.widths, True)
+        K.refit_arm(S, k, t.P, t.logPn, *args, C, t.gaps, t.widths, t.log_floor, True)
         # refit_arm left C the columns of the refitted S: combine them, no second scoring
         ll = float(K.combine(C, int(S[2]), -1, C[0], False, args[-1], t.P[K.P_FLOOR]))
         return S, ll + float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))

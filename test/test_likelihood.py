@@ -168,7 +168,29 @@ def test_refit_arm_finds_the_best_grid_point_of_the_reference_posterior(S, seed,
     R = S.copy()
     C = np.zeros((K.MAXA, len(obs)))
     K.full_loglik(R, tab.P, *obs.kernel_args(), C)
-    K.refit_arm(R, k, tab.P, tab.logPn, *obs.kernel_args(), C, tab.gaps, tab.widths, fixed)
+    K.refit_arm(R, k, tab.P, tab.logPn, *obs.kernel_args(), C, tab.gaps, tab.widths,
+                tab.log_floor, fixed)
     assert lpost(R) == pytest.approx(best, abs=1e-6)
     if fixed:
         assert (R[i0 + K.NIN], R[i0 + K.NOUT]) == (S[i0 + K.NIN], S[i0 + K.NOUT])
+
+
+@pytest.mark.parametrize('floor', [0.01, 0.2])
+def test_log_floor_table_interpolates_log_density_to_1e9(floor):
+    """refit_arm's table of log(exp(-x) + floor): cubic pieces within 1e-9 everywhere."""
+    T = K.log_floor_table(floor, 40.0)
+    x = np.r_[np.random.default_rng(0).uniform(0.0, 40.0, 200_000), 0.0, 40.0]
+    j = (x * K.LOG_FLOOR_INV_STEP).astype(int)
+    u = x * K.LOG_FLOOR_INV_STEP - j
+    f = T[j, 0] + u * (T[j, 1] + u * (T[j, 2] + u * T[j, 3]))
+    np.testing.assert_allclose(f, np.log(np.exp(-x) + floor), rtol=0, atol=1e-9)
+
+
+def test_refit_arm_refuses_a_table_too_short_for_the_cut():
+    tab = _Tables(TopologyConfig())
+    S = pack_state(easy_intersection(3))
+    obs = random_obs(np.random.default_rng(0), 20, center=S[:2], spread=30.0)
+    C = np.zeros((K.MAXA, len(obs)))
+    with pytest.raises(ValueError, match='too short'):
+        K.refit_arm(S, 0, tab.P, tab.logPn, *obs.kernel_args(), C, tab.gaps, tab.widths,
+                    K.log_floor_table(0.01, 5.0))
