@@ -1252,24 +1252,19 @@ def radar_frame(x, y, dop, sx, sy, cx, cy, angles, reach, min_cos, min_dop, keep
     for i in range(n):
         px = x[i] - cx
         py = y[i] - cy
-        r = math.hypot(px, py)
-        ox = sx[i] if math.isfinite(sx[i]) and math.isfinite(sy[i]) else cx
-        oy = sy[i] if math.isfinite(sx[i]) and math.isfinite(sy[i]) else cy
-        lx = x[i] - ox
-        ly = y[i] - oy
-        ll = math.hypot(lx, ly)
-        if r <= 1e-9 or ll <= 1e-9:
+        r2 = px * px + py * py
+        sensor = math.isfinite(sx[i]) and math.isfinite(sy[i])
+        lx = x[i] - (sx[i] if sensor else cx)
+        ly = y[i] - (sy[i] if sensor else cy)
+        l2 = lx * lx + ly * ly
+        if r2 <= 1e-18 or l2 <= 1e-18:
             continue
-        lx /= ll
-        ly /= ll
-        rx = px / r
-        ry = py / r
         k, s, t = _nearest_ray(px, py, aux, auy)
         on = k >= 0 and abs(t) <= reach
         if on:   # on an arm the lane direction is the arm's, not the radial direction
-            rx = aux[k]
-            ry = auy[k]
-        proj = rx * lx + ry * ly
+            proj = (aux[k] * lx + auy[k] * ly) / math.sqrt(l2)
+        else:
+            proj = (px * lx + py * ly) / math.sqrt(r2 * l2)
         unknown = abs(proj) < min_cos or abs(dop[i]) < min_dop
         if unknown and not keep_unknown:
             continue
