@@ -1000,6 +1000,198 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
     return out[:m]
 
 
+@njit(cache=True, nogil=True)
+def grid_voxel_index(x, y, cls, size):
+    """Square voxels (edge ``size``) per class: each row's voxel index, voxels numbered in
+    the order of (x bin, y bin, class) -- the sorted unique keys of ``preprocess.voxelise``
+    -- and the voxel count. Counted in a dense table within a small extent, else sorted."""
+    n = x.shape[0]
+    inv = np.empty(n, np.int64)
+    if n == 0:
+        return inv, 0
+    ib = np.empty(n, np.int64)
+    jb = np.empty(n, np.int64)
+    for r in range(n):
+        ib[r] = np.int64(math.floor(x[r] / size))
+        jb[r] = np.int64(math.floor(y[r] / size))
+    i0, j0, nc = ib.min(), jb.min(), cls.max() + 1
+    nj = jb.max() - j0 + 1
+    cells = (ib.max() - i0 + 1) * nj * nc
+    code = np.empty(n, np.int64)
+    if cells <= DENSE_CELLS:
+        rank = np.full(cells, -1, np.int64)
+        for r in range(n):
+            code[r] = ((ib[r] - i0) * nj + jb[r] - j0) * nc + cls[r]
+            rank[code[r]] = 0
+        m = 0
+        for c in range(cells):
+            if rank[c] == 0:
+                rank[c] = m
+                m += 1
+        for r in range(n):
+            inv[r] = rank[code[r]]
+        return inv, m
+    for r in range(n):
+        code[r] = ((ib[r] - i0) * nj + jb[r] - j0) * nc + cls[r]
+    o = np.argsort(code)
+    m = -1
+    for q in range(n):
+        if m < 0 or code[o[q]] != code[o[q - 1]]:
+            m += 1
+        inv[o[q]] = m
+    return inv, m + 1
+
+
+@njit(cache=True, nogil=True)
+def irls_center(px, py, nx, ny, w, c0x, c0y, scale, iters):
+    """Robust meeting point of the lines <n_i, x> = <n_i, p_i> (IRLS, Cauchy loss of scale
+    ``scale``, ridge 1e-3 x trace toward (c0x, c0y)); see ``preprocess.initial_center``."""
+    n = px.shape[0]
+    d = np.empty(n)
+    for i in range(n):
+        d[i] = nx[i] * px[i] + ny[i] * py[i]
+    cx = c0x
+    cy = c0y
+    for _ in range(iters):
+        mxx = 0.0
+        mxy = 0.0
+        myy = 0.0
+        bx = 0.0
+        by = 0.0
+        for i in range(n):
+            rr = (nx[i] * cx + ny[i] * cy - d[i]) / scale
+            wi = w[i] / (1.0 + rr * rr)
+            mxx += wi * nx[i] * nx[i]
+            mxy += wi * nx[i] * ny[i]
+            myy += wi * ny[i] * ny[i]
+            bx += wi * d[i] * nx[i]
+            by += wi * d[i] * ny[i]
+        lam = 1e-3 * max(mxx + myy, 1e-9)
+        a = mxx + lam
+        b = myy + lam
+        rx = bx + lam * c0x
+        ry = by + lam * c0y
+        det = a * b - mxy * mxy
+        nx_ = (b * rx - mxy * ry) / det
+        ny_ = (a * ry - mxy * rx) / det
+        done = math.hypot(nx_ - cx, ny_ - cy) < 1e-3
+        cx = nx_
+        cy = ny_
+        if done:
+            break
+    return cx, cy
+
+
+@njit(cache=True, nogil=True)
+def _robust_range(x, w, tail):
+    """Weighted (tail, 1 - tail) quantiles of ``x``: ignores light outliers at either end."""
+    o = np.argsort(x)
+    cw = np.cumsum(w[o])
+    lo = min(np.searchsorted(cw, tail * cw[-1], side='right'), x.shape[0] - 1)
+    hi = min(np.searchsorted(cw, (1.0 - tail) * cw[-1], side='left'), x.shape[0] - 1)
+    return x[o[lo]], x[o[hi]]
+
+
+@njit(cache=True, nogil=True)
+def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lanes, gap_max,
+               ts, iters, wmin, wmax, fit_width):
+    """Center from the arms' median axes and per arm (gap, lanes in, lanes out, width) from
+    the lateral spread of its observations (``preprocess.initial_lanes``).
+
+    Returns (cx, cy, params) with one row (gap, lanes in, lanes out, width) per angle."""
+    n = x.shape[0]
+    na = angles.shape[0]
+    ux = np.cos(angles)
+    uy = np.sin(angles)
+    cos20 = math.cos(math.radians(20.0))
+    P = np.empty((na, 4))
+    arm = np.empty(n, np.int64)
+    tt = np.empty(n)
+    for _ in range(iters):
+        for k in range(na):
+            P[k, 0] = 0.0
+            P[k, 1] = 1.0
+            P[k, 2] = 1.0
+            P[k, 3] = lane_width
+        for i in range(n):   # the arm whose axis the observation runs along (smallest |t|)
+            px = x[i] - cx
+            py = y[i] - cy
+            arm[i] = -1
+            best = np.inf
+            for k in range(na):
+                sk = px * ux[k] + py * uy[k]
+                tk = py * ux[k] - px * uy[k]
+                ok = sk > 8.0 and abs(tk) < 25.0
+                if ok and has_o[i]:
+                    ok = abs(hx[i] * ux[k] + hy[i] * uy[k]) > cos20
+                if ok and abs(tk) < best:
+                    best = abs(tk)
+                    arm[i] = k
+                    tt[i] = tk
+        a11 = 0.0
+        a12 = 0.0
+        a22 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        for k in range(na):
+            ni_ = 0
+            no_ = 0
+            for i in range(n):
+                if arm[i] == k:
+                    if (hx[i] * ux[k] + hy[i] * uy[k] < 0.0) if has_o[i] else dcls[i] > 0.0:
+                        ni_ += 1
+                    else:
+                        no_ += 1
+            if ni_ == 0 or no_ == 0:
+                continue
+            ti = np.empty(ni_)
+            wi = np.empty(ni_)
+            to = np.empty(no_)
+            wo = np.empty(no_)
+            ni_ = 0
+            no_ = 0
+            for i in range(n):
+                if arm[i] == k:
+                    if (hx[i] * ux[k] + hy[i] * uy[k] < 0.0) if has_o[i] else dcls[i] > 0.0:
+                        ti[ni_] = tt[i] * ts
+                        wi[ni_] = w[i]
+                        ni_ += 1
+                    else:
+                        to[no_] = -tt[i] * ts
+                        wo[no_] = w[i]
+                        no_ += 1
+            lo_i, hi_i = _robust_range(ti, wi, 0.03)
+            lo_o, hi_o = _robust_range(to, wo, 0.03)
+            axis = 0.5 * (lo_i - lo_o) * ts        # lateral offset of the median axis
+            inner = 0.5 * (lo_i + lo_o)            # gap/2 + w/2
+            nin = min(max(round((hi_i - lo_i) / lane_width) + 1, 1), max_lanes)
+            nout = min(max(round((hi_o - lo_o) / lane_width) + 1, 1), max_lanes)
+            wd = lane_width
+            if fit_width and nin + nout > 2:
+                wd = min(max(((hi_i - lo_i) + (hi_o - lo_o)) / (nin + nout - 2), wmin), wmax)
+            P[k, 0] = min(max(2.0 * (inner - 0.5 * wd), 0.0), gap_max)
+            P[k, 1] = nin
+            P[k, 2] = nout
+            P[k, 3] = wd
+            wk = float(min(ni_, no_))
+            nx = -uy[k]
+            ny = ux[k]
+            off = nx * cx + ny * cy + axis
+            a11 += wk * nx * nx
+            a12 += wk * nx * ny
+            a22 += wk * ny * ny
+            b1 += wk * nx * off
+            b2 += wk * ny * off
+        lam = 1e-3 * max(a11 + a22, 1e-9)
+        a11 += lam
+        a22 += lam
+        b1 += lam * cx
+        b2 += lam * cy
+        det = a11 * a22 - a12 * a12
+        cx, cy = (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
+    return cx, cy, P
+
+
 #: Largest (arm x along x lateral x class) box of voxel cells counted in a dense table;
 #: larger extents (far-flung rows) fall back to sorting the keys.
 DENSE_CELLS = 1 << 22

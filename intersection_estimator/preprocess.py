@@ -26,8 +26,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._kernels import (arm_voxels, local_pca, nearest_rays, radar_frame, radar_voxels,
-                       split_tracks)
+from ._kernels import (arm_voxels, grid_voxel_index, irls_center, lane_guess, local_pca,
+                       nearest_rays, radar_frame, radar_voxels, split_tracks)
 from .likelihood import ObservationSet
 from .model import wrap_angle
 from .observations import Detections
@@ -82,26 +82,28 @@ def _direction_class(x, y, hx, hy, center):
 
 def voxelise(xy: np.ndarray, cls: np.ndarray, size: float, vec: np.ndarray | None = None,
              t: np.ndarray | None = None, gap: float = 1.0):
-    """Merge points per (voxel, class): mean position, count (and summed vectors).
+    """Merge points per (voxel, class): mean position, count (and summed vectors); voxels
+    in the order of (x bin, y bin, class), classes in [0, 64) (grouping compiled:
+    :func:`_kernels.grid_voxel_index`).
 
     With stamps ``t`` the counts are divided by the mean number of detections per vehicle
     passage (see :func:`passages`), i.e. expressed in vehicles."""
     if len(xy) == 0:
         return np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2))
-    ij = np.floor(xy / size).astype(np.int64)
-    key = (((ij[:, 0] + (1 << 20)) << 22) + (ij[:, 1] + (1 << 20))) * 64 + cls.astype(np.int64)
-    uk, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-    inv = inv.reshape(-1)
-    mx = np.bincount(inv, xy[:, 0], len(uk)) / cnt
-    my = np.bincount(inv, xy[:, 1], len(uk)) / cnt
-    first = np.zeros(len(uk), np.int64)
+    if cls.min() < 0 or cls.max() >= 64:
+        raise ValueError('voxelise: classes must lie in [0, 64)')
+    inv, m = grid_voxel_index(np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+                              np.asarray(cls, np.int64), float(size))
+    cnt = np.bincount(inv, minlength=m)
+    mx = np.bincount(inv, xy[:, 0], m) / cnt
+    my = np.bincount(inv, xy[:, 1], m) / cnt
+    first = np.zeros(m, np.int64)
     first[inv[::-1]] = np.arange(len(inv))[::-1]
-    sv = np.zeros((len(uk), 2))
+    sv = np.zeros((m, 2))
     if vec is not None:
-        sv = np.stack([np.bincount(inv, vec[:, 0], len(uk)),
-                       np.bincount(inv, vec[:, 1], len(uk))], axis=1)
+        sv = np.stack([np.bincount(inv, vec[:, 0], m), np.bincount(inv, vec[:, 1], m)], axis=1)
     if t is not None and gap > 0:   # counts in vehicle passages (global detections/passage)
-        per_pass = len(xy) / max(passages(inv, t, len(uk), gap).sum(), 1.0)
+        per_pass = len(xy) / max(passages(inv, t, m, gap).sum(), 1.0)
         return np.stack([mx, my], axis=1), cls[first], cnt / per_pass, sv
     return np.stack([mx, my], axis=1), cls[first], cnt.astype(np.float64), sv
 
@@ -411,23 +413,12 @@ def initial_center(p: np.ndarray, o: np.ndarray, w: np.ndarray, scale: float = 6
     """
     if len(p) == 0:
         return None
-    c0 = np.array([_wmedian(p[:, 0], w), _wmedian(p[:, 1], w)])
-    nx, ny = -o[:, 1], o[:, 0]
-    d = nx * p[:, 0] + ny * p[:, 1]                 # line i: <n_i, x> = d_i
-    outer = np.stack([nx * nx, nx * ny, ny * ny])   # n n^T, upper triangle
-    c = c0.copy()
-    for _ in range(iters):
-        wi = w / (1.0 + ((nx * c[0] + ny * c[1] - d) / scale) ** 2)
-        mxx, mxy, myy = outer @ wi
-        bx, by = (wi * d) @ np.stack([nx, ny], axis=1)
-        lam = 1e-3 * max(mxx + myy, 1e-9)
-        M = np.array([[mxx + lam, mxy], [mxy, myy + lam]])
-        c_new = np.linalg.solve(M, np.array([bx, by]) + lam * c0)
-        if np.hypot(*(c_new - c)) < 1e-3:
-            c = c_new
-            break
-        c = c_new
-    return c
+    c0 = (_wmedian(p[:, 0], w), _wmedian(p[:, 1], w))
+    c = irls_center(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]),
+                    np.ascontiguousarray(-o[:, 1]), np.ascontiguousarray(o[:, 0]),
+                    np.ascontiguousarray(w, dtype=np.float64), c0[0], c0[1], float(scale),
+                    int(iters))
+    return np.array(c)
 
 
 def _wmedian(x, w):
@@ -489,60 +480,13 @@ def initial_lanes(obs: ObservationSet, center, angles, lane_width: float, max_la
     (center, [(gap, lanes_in, lanes_out, width), ...]).
     """
     c = np.asarray(center, float).copy()
-    n_arm = len(angles)
-    u = np.array([[math.cos(a), math.sin(a)] for a in angles]).reshape(n_arm, 2)
-    nrm = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    params = [(0.0, 1, 1, lane_width)] * n_arm
-    if len(obs) == 0 or n_arm == 0:
+    params = [(0.0, 1, 1, lane_width)] * len(angles)
+    if len(obs) == 0 or len(angles) == 0:
         return c, params
-    p = obs.xy
-    o = np.stack([obs.hx, obs.hy], axis=1)
-    for _ in range(iters):
-        v = p - c
-        s = v @ u.T
-        t = v @ nrm.T
-        par = np.abs(o @ u.T)
-        ok = (s > 8.0) & (np.abs(t) < 25.0) & (~obs.has_o[:, None] | (par > math.cos(math.radians(20))))
-        cost = np.where(ok, np.abs(t), np.inf)
-        arm = np.argmin(cost, axis=1)
-        has = np.isfinite(cost[np.arange(len(p)), arm])
-        A = np.zeros((2, 2))
-        b = np.zeros(2)
-        params = []
-        for k in range(n_arm):
-            m = has & (arm == k)
-            ent = np.where(obs.has_o[m], (o[m] @ u[k]) < 0, obs.d[m] > 0)
-            tk = t[m, k] * traffic_side
-            wk_ = obs.w[m]
-            ti, to = tk[ent], -tk[~ent]
-            if len(ti) == 0 or len(to) == 0:
-                params.append((0.0, 1, 1, lane_width))
-                continue
-            lo_i, hi_i = _robust_range(ti, wk_[ent])
-            lo_o, hi_o = _robust_range(to, wk_[~ent])
-            axis = 0.5 * (lo_i - lo_o) * traffic_side       # lateral offset of the median axis
-            inner = 0.5 * (lo_i + lo_o)                      # gap/2 + w/2
-            gap = float(np.clip(2.0 * (inner - 0.5 * lane_width), 0.0, gap_max))
-            nin = int(np.clip(round((hi_i - lo_i) / lane_width) + 1, 1, max_lanes))
-            nout = int(np.clip(round((hi_o - lo_o) / lane_width) + 1, 1, max_lanes))
-            wd = lane_width
-            if width_range is not None and nin + nout > 2:
-                wd = ((hi_i - lo_i) + (hi_o - lo_o)) / (nin + nout - 2)
-                wd = float(np.clip(wd, *width_range))
-            gap = float(np.clip(2.0 * (inner - 0.5 * wd), 0.0, gap_max))
-            params.append((gap, nin, nout, wd))
-            wk = float(min(len(ti), len(to)))
-            A += wk * np.outer(nrm[k], nrm[k])
-            b += wk * nrm[k] * (nrm[k] @ c + axis)
-        lam = 1e-3 * max(np.trace(A), 1e-9)
-        c = np.linalg.solve(A + lam * np.eye(2), b + lam * c)
-    return c, params
-
-
-def _robust_range(x: np.ndarray, w: np.ndarray, tail: float = 0.03) -> tuple[float, float]:
-    """Weighted (tail, 1 - tail) quantiles: ignores only light outliers at either end."""
-    i = np.argsort(x)
-    x, cw = x[i], np.cumsum(w[i])
-    lo = int(np.searchsorted(cw, tail * cw[-1], side='right'))
-    hi = int(np.searchsorted(cw, (1.0 - tail) * cw[-1], side='left'))
-    return float(x[min(lo, len(x) - 1)]), float(x[min(hi, len(x) - 1)])
+    cx, cy, P = lane_guess(obs.x, obs.y, obs.hx, obs.hy, obs.has_o, obs.d,
+                           np.asarray(obs.w, float), float(c[0]), float(c[1]),
+                           np.asarray(angles, float), float(lane_width), int(max_lanes),
+                           float(gap_max), float(traffic_side), int(iters),
+                           *((float(width_range[0]), float(width_range[1]), True)
+                             if width_range is not None else (lane_width, lane_width, False)))
+    return np.array([cx, cy]), [(float(g), int(ni), int(no), float(wd)) for g, ni, no, wd in P]
