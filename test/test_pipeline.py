@@ -10,6 +10,7 @@ import pytest
 from intersection_estimator.observations import Detections
 from intersection_estimator.pipeline import OnlineEstimator, PipelineConfig, estimate
 from intersection_estimator.sim import simulate_scenario
+from intersection_estimator.topology import TopologyConfig
 
 
 @pytest.fixture(scope='module')
@@ -26,7 +27,7 @@ def test_estimate_is_deterministic_per_seed(scenario):
     a = estimate(dets, mode='tracked', topology_samples=1500, lane_samples=3000, seed=3)
     b = estimate(dets, mode='tracked', topology_samples=1500, lane_samples=3000, seed=3)
     assert _json(a) == _json(b)
-    assert a.topology_samples == 1500 and a.lane_samples > 0
+    assert a.topology_samples == 1500 * TopologyConfig().chains_tracked and a.lane_samples > 0
     assert set(a.timing_ms) == {'topology', 'lanes', 'total'}
 
 

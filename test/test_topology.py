@@ -21,7 +21,8 @@ def test_config_defaults_follow_the_paper_and_validate():
 @pytest.mark.parametrize('field,value', [('p_rotate', -0.1), ('min_sep_deg', 0.0),
                                          ('max_arms', 99), ('sigma_track', 0.0),
                                          ('lane_width', 9.0), ('t_end', 100.0),
-                                         ('traffic_side', 0), ('voxel_size', 0.0)])
+                                         ('traffic_side', 0), ('voxel_size', 0.0),
+                                         ('chains', 0), ('chains_tracked', 17)])
 def test_config_validate_names_the_parameter(field, value):
     with pytest.raises(ValueError, match=field):
         TopologyConfig(**{field: value}).validate()
@@ -93,7 +94,7 @@ def test_descent_repairs_a_lane_count_and_never_lowers_the_posterior(field, d):
     center shifted by 1 m) it finds the true counts and does not lose posterior."""
     from intersection_estimator.moves import pack_state
     gt = EASY[0]
-    est = TopologyEstimator(TopologyConfig(), seed=5)
+    est = TopologyEstimator(TopologyConfig(chains_tracked=1), seed=5)
     est.set_observations(scene(gt, 'tracked', seed=3, clutter=10))
     bad = _off_by(gt, 1, field, d)
     bad.center = bad.center + np.array([1.0, 0.0])
@@ -101,7 +102,7 @@ def test_descent_repairs_a_lane_count_and_never_lowers_the_posterior(field, d):
     est._chain.best_lpost = est.log_posterior(bad)
     before = est.best_log_posterior
     assert est.log_posterior(gt) > before        # the scene decides: truth scores higher
-    est._descend()
+    est._descend(est._chain)
     assert est.best_log_posterior >= before
     assert same_topology(gt, est.best), est.best
 
@@ -122,12 +123,30 @@ def test_an_arm_explaining_fewer_passages_than_min_arm_support_is_not_reported()
     extra.arms.append(Arm(angle=math.radians(-40.0), gap=0.0, lanes_in=1, lanes_out=1,
                           lane_width=3.5))
     for support, n_arms in ((2.5, len(gt.arms)), (0.0, len(gt.arms) + 1)):
-        est = TopologyEstimator(TopologyConfig(min_arm_support=support), seed=0)
+        est = TopologyEstimator(TopologyConfig(min_arm_support=support, chains_tracked=1), seed=0)
         est.set_observations(dets)
         est._chain.best_S[:] = pack_state(extra)
         est._chain.best_lpost = est.log_posterior(extra)
         assert len(est.best.arms) == n_arms
         assert est.best_log_posterior == pytest.approx(est.log_posterior(est.best))
+
+
+@pytest.mark.parametrize('mode,n', [('tracked', 3), ('raw', 2), ('heading', 2)])
+def test_chains_share_one_observation_set_and_the_best_is_reported(mode, n):
+    """Trajectories get ``chains_tracked`` chains, detections ``chains``; after recentering
+    every chain is re-scored, so each chain's best is its posterior on the observations
+    now held, and the reported estimate is the best chain's."""
+    from intersection_estimator.moves import unpack_state
+    est = TopologyEstimator(TopologyConfig(chains=2, chains_tracked=3), seed=4)
+    est.set_observations(scene(EASY[2], mode, seed=2))
+    est.run(n_samples=3000)
+    assert est.n_chains == n and est.preprocess_count >= 1
+    lposts = [c.best_lpost for c in est._chains]
+    for c in est._chains:
+        assert est.log_posterior(unpack_state(c.best_S, 1)) == pytest.approx(c.best_lpost, abs=1e-6)
+    assert est._chain.best_lpost == max(lposts)
+    assert len({c.stats.tobytes() for c in est._chains}) == n    # own RNG streams
+    assert sum(st[0] for st in est.acceptance.values()) > 3000 * (n - 1)
 
 
 def test_descent_off_draws_nothing_extra():
@@ -139,7 +158,8 @@ def test_descent_off_draws_nothing_extra():
         est.set_observations(dets)
         n[rounds] = est.run(n_samples=1500)
         assert n[rounds] == est.samples_drawn
-    assert n[0] == 1500 and n[2] > 1500
+    assert est.n_chains == 2                     # trajectories: chains_tracked chains
+    assert n[0] == 2 * 1500 and n[2] > 2 * 1500  # every chain advances by n_samples
 
 
 def test_anytime_run_by_time_budget_and_warm_start():
@@ -153,7 +173,7 @@ def test_anytime_run_by_time_budget_and_warm_start():
     est.set_observations(scene(gt, 'tracked', seed=2))   # new window, same intersection
     assert est.best is not None                            # the chain is kept
     est.run(n_samples=1000)
-    assert est.samples_drawn == before + 1000
+    assert est.samples_drawn == before + 1000 * est.n_chains   # each chain advances
     assert same_topology(gt, est.best)
     with pytest.raises(ValueError):
         est.run()
