@@ -1000,15 +1000,47 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
     return out[:m]
 
 
+#: Largest box of voxel cells counted in a dense table (:func:`_group_codes`); larger
+#: extents (far-flung rows) fall back to sorting.
+DENSE_CELLS = 1 << 22
+
+
+@njit(cache=True, nogil=True)
+def _group_codes(code, cells):
+    """Each row's group index, groups numbered in increasing ``code`` (cell codes in
+    [0, cells)), and the group count: within ``DENSE_CELLS`` counted in a dense table (no
+    sort), otherwise by sorting the codes."""
+    n = code.shape[0]
+    slot = np.empty(n, np.int64)
+    if cells <= DENSE_CELLS:
+        rank = np.full(cells, -1, np.int64)
+        for i in range(n):
+            rank[code[i]] = 0
+        m = 0
+        for c in range(cells):
+            if rank[c] == 0:
+                rank[c] = m
+                m += 1
+        for i in range(n):
+            slot[i] = rank[code[i]]
+        return slot, m
+    o = np.argsort(code)
+    m = -1
+    for q in range(n):
+        if m < 0 or code[o[q]] != code[o[q - 1]]:
+            m += 1
+        slot[o[q]] = m
+    return slot, m + 1
+
+
 @njit(cache=True, nogil=True)
 def grid_voxel_index(x, y, cls, size):
     """Square voxels (edge ``size``) per class: each row's voxel index, voxels numbered in
     the order of (x bin, y bin, class) -- the sorted unique keys of ``preprocess.voxelise``
     -- and the voxel count. Counted in a dense table within a small extent, else sorted."""
     n = x.shape[0]
-    inv = np.empty(n, np.int64)
     if n == 0:
-        return inv, 0
+        return np.empty(0, np.int64), 0
     ib = np.empty(n, np.int64)
     jb = np.empty(n, np.int64)
     for r in range(n):
@@ -1016,30 +1048,23 @@ def grid_voxel_index(x, y, cls, size):
         jb[r] = np.int64(math.floor(y[r] / size))
     i0, j0, nc = ib.min(), jb.min(), cls.max() + 1
     nj = jb.max() - j0 + 1
-    cells = (ib.max() - i0 + 1) * nj * nc
     code = np.empty(n, np.int64)
-    if cells <= DENSE_CELLS:
-        rank = np.full(cells, -1, np.int64)
-        for r in range(n):
-            code[r] = ((ib[r] - i0) * nj + jb[r] - j0) * nc + cls[r]
-            rank[code[r]] = 0
-        m = 0
-        for c in range(cells):
-            if rank[c] == 0:
-                rank[c] = m
-                m += 1
-        for r in range(n):
-            inv[r] = rank[code[r]]
-        return inv, m
     for r in range(n):
         code[r] = ((ib[r] - i0) * nj + jb[r] - j0) * nc + cls[r]
-    o = np.argsort(code)
-    m = -1
-    for q in range(n):
-        if m < 0 or code[o[q]] != code[o[q - 1]]:
-            m += 1
-        inv[o[q]] = m
-    return inv, m + 1
+    return _group_codes(code, (ib.max() - i0 + 1) * nj * nc)
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _ridge_solve2(a11, a12, a22, b1, b2, px, py):
+    """(A + lam I) x = b + lam p for the symmetric 2x2 ``A``, lam = 1e-3 trace(A) (at
+    least 1e-12): the least-squares point, pulled toward ``p`` where A is degenerate."""
+    lam = 1e-3 * max(a11 + a22, 1e-9)
+    a11 += lam
+    a22 += lam
+    b1 += lam * px
+    b2 += lam * py
+    det = a11 * a22 - a12 * a12
+    return (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
 
 
 @njit(cache=True, nogil=True)
@@ -1066,14 +1091,7 @@ def irls_center(px, py, nx, ny, w, c0x, c0y, scale, iters):
             myy += wi * ny[i] * ny[i]
             bx += wi * d[i] * nx[i]
             by += wi * d[i] * ny[i]
-        lam = 1e-3 * max(mxx + myy, 1e-9)
-        a = mxx + lam
-        b = myy + lam
-        rx = bx + lam * c0x
-        ry = by + lam * c0y
-        det = a * b - mxy * mxy
-        nx_ = (b * rx - mxy * ry) / det
-        ny_ = (a * ry - mxy * rx) / det
+        nx_, ny_ = _ridge_solve2(mxx, mxy, myy, bx, by, c0x, c0y)
         done = math.hypot(nx_ - cx, ny_ - cy) < 1e-3
         cx = nx_
         cy = ny_
@@ -1107,6 +1125,7 @@ def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lan
     P = np.empty((na, 4))
     arm = np.empty(n, np.int64)
     tt = np.empty(n)
+    ent = np.empty(n, np.bool_)
     for _ in range(iters):
         for k in range(na):
             P[k, 0] = 0.0
@@ -1128,6 +1147,9 @@ def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lan
                     best = abs(tk)
                     arm[i] = k
                     tt[i] = tk
+            if arm[i] >= 0:   # entering: heading against the arm, else the Doppler class
+                k = arm[i]
+                ent[i] = (hx[i] * ux[k] + hy[i] * uy[k] < 0.0) if has_o[i] else dcls[i] > 0.0
         a11 = 0.0
         a12 = 0.0
         a22 = 0.0
@@ -1138,7 +1160,7 @@ def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lan
             no_ = 0
             for i in range(n):
                 if arm[i] == k:
-                    if (hx[i] * ux[k] + hy[i] * uy[k] < 0.0) if has_o[i] else dcls[i] > 0.0:
+                    if ent[i]:
                         ni_ += 1
                     else:
                         no_ += 1
@@ -1152,7 +1174,7 @@ def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lan
             no_ = 0
             for i in range(n):
                 if arm[i] == k:
-                    if (hx[i] * ux[k] + hy[i] * uy[k] < 0.0) if has_o[i] else dcls[i] > 0.0:
+                    if ent[i]:
                         ti[ni_] = tt[i] * ts
                         wi[ni_] = w[i]
                         ni_ += 1
@@ -1182,65 +1204,28 @@ def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lan
             a22 += wk * ny * ny
             b1 += wk * nx * off
             b2 += wk * ny * off
-        lam = 1e-3 * max(a11 + a22, 1e-9)
-        a11 += lam
-        a22 += lam
-        b1 += lam * cx
-        b2 += lam * cy
-        det = a11 * a22 - a12 * a12
-        cx, cy = (a22 * b1 - a12 * b2) / det, (a11 * b2 - a12 * b1) / det
+        cx, cy = _ridge_solve2(a11, a12, a22, b1, b2, cx, cy)
     return cx, cy, P
-
-
-#: Largest (arm x along x lateral x class) box of voxel cells counted in a dense table;
-#: larger extents (far-flung rows) fall back to sorting the keys.
-DENSE_CELLS = 1 << 22
 
 
 @njit(cache=True, nogil=True)
 def _voxel_slots(key, arm, sb, tb, cls):
     """Sorted unique ``key`` values and each row's index into them. Keys order rows by
-    (arm, along bin, lateral bin, class); within a small extent the cells are counted in
-    a dense table (no sort), otherwise the keys are sorted."""
+    (arm, along bin, lateral bin, class), as the cell codes :func:`_group_codes` groups."""
     n = key.shape[0]
-    slot = np.empty(n, np.int64)
     if n == 0:
-        return np.empty(0, np.int64), slot
-    a0, a1, s0, s1, t0, t1 = arm.min(), arm.max(), sb.min(), sb.max(), tb.min(), tb.max()
-    ns = s1 - s0 + 1
-    nt = t1 - t0 + 1
-    size = (a1 - a0 + 1) * ns * nt * 4
-    if size <= DENSE_CELLS:
-        code = np.empty(n, np.int64)
-        rank = np.full(size, -1, np.int64)
-        for i in range(n):
-            code[i] = (((arm[i] - a0) * ns + sb[i] - s0) * nt + tb[i] - t0) * 4 + cls[i]
-            rank[code[i]] = 0
-        uk = np.empty(n, np.int64)
-        m = 0
-        for c in range(size):
-            if rank[c] == 0:
-                rank[c] = m
-                a = c // (ns * nt * 4)
-                r = c - a * ns * nt * 4
-                si = r // (nt * 4)
-                r -= si * nt * 4
-                ti = r // 4
-                uk[m] = (((a + a0) * 1024 + si + s0 + 512) * 4096 + ti + t0 + 2048) * 4 + r - ti * 4
-                m += 1
-        for i in range(n):
-            slot[i] = rank[code[i]]
-        return uk[:m], slot
-    o = np.argsort(key)
-    uk = np.empty(n, np.int64)
-    m = -1
-    for r in range(n):
-        i = o[r]
-        if m < 0 or key[i] != uk[m]:
-            m += 1
-            uk[m] = key[i]
-        slot[i] = m
-    return uk[:m + 1], slot
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    a0, s0, t0 = arm.min(), sb.min(), tb.min()
+    ns = sb.max() - s0 + 1
+    nt = tb.max() - t0 + 1
+    code = np.empty(n, np.int64)
+    for i in range(n):
+        code[i] = (((arm[i] - a0) * ns + sb[i] - s0) * nt + tb[i] - t0) * 4 + cls[i]
+    slot, m = _group_codes(code, (arm.max() - a0 + 1) * ns * nt * 4)
+    uk = np.empty(m, np.int64)
+    for i in range(n):
+        uk[slot[i]] = key[i]
+    return uk, slot
 
 
 @njit(cache=True, nogil=True)
