@@ -424,9 +424,7 @@ class TopologyEstimator:
 
     def log_posterior(self, inter: Intersection) -> float:
         """log P(I|Z) + const of any intersection under the current observations."""
-        S = pack_state(inter)
-        ll, _ = self._score(S)
-        return ll + float(K.log_prior(S, self._t.logPA, self._t.logPn, self._t.arm_const))
+        return self._lpost(pack_state(inter))
 
     # ------------------------------------------------------------------ internals
     def _initialise(self) -> None:
@@ -468,11 +466,7 @@ class TopologyEstimator:
             for k in range(int(c.S[2])):
                 K.refit_arm(c.S, k, self._t.P, self._t.logPn, *self._obs.kernel_args(), c.C,
                             self._t.gaps, self._t.widths, self._t.log_floor)
-        c.ll, _ = self._score(c.S, c.C)
-        c.lp = float(K.log_prior(c.S, self._t.logPA, self._t.logPn, self._t.arm_const))
-        if c.ll + c.lp > c.best_lpost:
-            c.best_S[:] = c.S
-            c.best_lpost = c.ll + c.lp
+        self._rescore(c)
 
     def _descend(self, c: Chain) -> None:
         """Greedy descent from chain ``c``'s MAP state at the end of its schedule (beyond the paper).
@@ -547,7 +541,7 @@ class TopologyEstimator:
         K.refit_arm(S, k, t.P, t.logPn, *args, C, t.gaps, t.widths, t.log_floor, True)
         # refit_arm left C the columns of the refitted S: combine them, no second scoring
         ll = float(K.combine(C, int(S[2]), -1, C[0], False, args[-1], t.P[K.P_FLOOR]))
-        return S, ll + float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
+        return S, ll + self._log_prior(S)
 
     def _descent_run(self, S, ref=None, focus=-1):
         """``descent_samples`` continuous moves at ``descent_temp`` from ``S``: (best, lpost);
@@ -560,7 +554,7 @@ class TopologyEstimator:
         m = cfg.descent_samples
         C = np.zeros((K.MAXA, len(self._obs)))
         ll, _ = self._score(S, C)
-        lp = float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
+        lp = self._log_prior(S)
         ch = Chain(S=S.copy(), C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
                    stats=np.zeros(2 * len(K.MOVE_NAMES), np.int64))
         P = t.P_polish
@@ -613,15 +607,8 @@ class TopologyEstimator:
         self._pp_center = np.asarray(obs_center, float).copy()
         self.preprocess_count += 1
         for c in self._chains:
-            c.C = np.zeros((K.MAXA, len(self._obs)))
-            c.ll, _ = self._score(c.S, c.C)
-            c.lp = float(K.log_prior(c.S, self._t.logPA, self._t.logPn, self._t.arm_const))
-            bl, _ = self._score(c.best_S)
-            c.best_lpost = bl + float(K.log_prior(c.best_S, self._t.logPA, self._t.logPn,
-                                                  self._t.arm_const))
-            if c.ll + c.lp > c.best_lpost:
-                c.best_S[:] = c.S
-                c.best_lpost = c.ll + c.lp
+            c.best_lpost = self._lpost(c.best_S)
+            self._rescore(c)
         self._ref_best = self._chain.best_lpost
         self._last_improve = self._chain.step
 
@@ -629,6 +616,25 @@ class TopologyEstimator:
         if self._radar is None:
             self._radar = radar_rows(self._dets, self._pcfg)
         return preprocess(self._dets, center, self._pcfg, angles, self._radar)
+
+    def _rescore(self, c: Chain) -> None:
+        """Chain ``c``'s current state scored in full on the observations held (columns
+        remade); its best state takes the current one if that scores higher."""
+        if c.C.shape[1] != len(self._obs):
+            c.C = np.zeros((K.MAXA, len(self._obs)))
+        c.ll, _ = self._score(c.S, c.C)
+        c.lp = self._log_prior(c.S)
+        if c.ll + c.lp > c.best_lpost:
+            c.best_S[:] = c.S
+            c.best_lpost = c.ll + c.lp
+
+    def _log_prior(self, S) -> float:
+        t = self._t
+        return float(K.log_prior(S, t.logPA, t.logPn, t.arm_const))
+
+    def _lpost(self, S) -> float:
+        """log P(I|Z) + const of the packed state ``S`` (scored in full)."""
+        return self._score(S)[0] + self._log_prior(S)
 
     def _score(self, S, C=None):
         if C is None:
@@ -691,8 +697,7 @@ class TopologyEstimator:
                 sup = self._support(S)
                 lpost = None
             if lpost is None:
-                ll, _ = self._score(S)
-                lpost = ll + float(K.log_prior(S, self._t.logPA, self._t.logPn, self._t.arm_const))
+                lpost = self._lpost(S)
             self._rep = (S, 1.0 - np.exp(-sup / 3.0), lpost)
             self._rep_key = key
         return self._rep
