@@ -182,7 +182,6 @@ def radar_filter(dets: Detections, cfg: PreprocessConfig, moving_only: bool = Tr
 class RadarRows(NamedTuple):
     """Radar rows surviving the clutter filter, center-free (see :func:`radar_rows`)."""
 
-    xy: np.ndarray
     x: np.ndarray
     y: np.ndarray
     t: np.ndarray
@@ -195,8 +194,7 @@ def radar_rows(dets: Detections, cfg: PreprocessConfig) -> RadarRows:
     """The rows :func:`radar_observations` voxelises, filtered once per data set: callers
     that preprocess the same detections around several centers pass it along."""
     m = radar_filter(dets, cfg, moving_only=False)
-    xy = dets.xy[m]
-    return RadarRows(xy, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+    return RadarRows(np.ascontiguousarray(dets.xy[m, 0]), np.ascontiguousarray(dets.xy[m, 1]),
                      dets.t[m], dets.doppler[m], np.ascontiguousarray(dets.sensor_xy[m, 0]),
                      np.ascontiguousarray(dets.sensor_xy[m, 1]))
 
@@ -232,8 +230,8 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
         np.zeros(0), float(cfg.arm_reach), float(cfg.min_radial_cos), float(cfg.min_doppler),
         bool(cfg.keep_unknown_direction), np.zeros(0))
     b = group == 2
-    vxy, vcls, cnt = voxelise(rows.xy[b], cls[b], cfg.voxel_size, t=rows.t[b],
-                              gap=cfg.passage_gap)[:3]
+    vxy, vcls, cnt = voxelise(np.stack([rows.x[b], rows.y[b]], axis=1), cls[b],
+                              cfg.voxel_size, t=rows.t[b], gap=cfg.passage_gap)[:3]
     dcls = np.select([vcls == 1, vcls == 0], [1.0, -1.0], 0.0)
     obs = _radar_set(vxy[:, 0].copy(), vxy[:, 1].copy(), dcls, cnt, cfg)
     return _drop_near_center(obs, c, cfg)

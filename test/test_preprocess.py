@@ -273,7 +273,8 @@ def test_fused_radar_voxels_equal_frame_then_voxels(seed, shift, turn, min_dist)
         rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]), float(c[1]),
         np.asarray(angles, float), cfg.arm_reach, cfg.min_radial_cos, cfg.min_doppler,
         cfg.keep_unknown_direction, RAYS)
-    parts = [_arm_voxels(rows.xy[g], cls[g], arm[g], s[g], t[g], rows.t[g], cfg)
+    xy_rows = np.stack([rows.x, rows.y], axis=1)
+    parts = [_arm_voxels(xy_rows[g], cls[g], arm[g], s[g], t[g], rows.t[g], cfg)
              for g in (group == 1, group == 2)]
     xy, vc, cnt = (np.concatenate(p) for p in zip(*parts))
     keep = np.hypot(xy[:, 0] - c[0], xy[:, 1] - c[1]) >= min_dist
