@@ -24,6 +24,10 @@ import sys
 
 import numpy as np
 
+# Hash this checkout's package, not whatever copy the venv has installed (a stale install
+# would report "unchanged" for any edit).
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 SEEDS = range(17)
 MODES = ('raw', 'tracked', 'heading')
 LANE_SAMPLES = {'raw': 0, 'tracked': 4000, 'heading': 0}
@@ -95,6 +99,8 @@ def main(argv=None) -> int:
     ap.add_argument('--check', metavar='HASH', help='exit 1 unless the overall hash equals HASH')
     ap.add_argument('--quick', action='store_true', help='3 seeds per mode and no replays')
     args = ap.parse_args(argv)
+    import intersection_estimator
+    print(f'package: {Path(intersection_estimator.__file__).parent}')
     groups = scenario_docs(range(3) if args.quick else SEEDS)
     if not args.quick:
         groups.update(replay_docs())

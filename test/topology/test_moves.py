@@ -6,40 +6,23 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from intersection_estimator import _kernels as K
 from intersection_estimator.model import Arm, Intersection
-from intersection_estimator.moves import (MOVE_NAMES, arm_rows, is_valid, pack_state,
-                                          proposal_log_density, propose_move, unpack_state)
-from intersection_estimator.topology import TopologyConfig, _Tables
+from intersection_estimator.topology import TopologyConfig
+from intersection_estimator.topology.config import Tables
+from intersection_estimator.topology.mcmc import run_chain
+from intersection_estimator.topology.moves import (ADD_ARM, CHANGE_GAP, LANE, MOVE_NAMES,
+                                                   REMOVE_ARM, ROTATE, SHIFT, WIDTH)
+from intersection_estimator.topology.state import (GAP, HDR, MAXA, NIN, NOUT, P_FOCUS,
+                                                   P_FOCUS_P, STRIDE, WID, arm_rows,
+                                                   pack_state)
+from reference.moves import is_valid, proposal_log_density, propose_kind, propose_move
+
+from .strategies import states
 
 CFG = TopologyConfig()
-TAB = _Tables(CFG)
+TAB = Tables(CFG)
 P = TAB.P
 SET = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-
-
-@st.composite
-def states(draw):
-    """Valid packed states: arm angles at least min_sep apart, bounds respected."""
-    ms = math.radians(CFG.min_sep_deg)
-    n = draw(st.integers(CFG.min_arms, CFG.max_arms))
-    slack = 2 * math.pi - n * ms
-    raw = draw(st.lists(st.floats(0.01, 1.0), min_size=n, max_size=n))
-    gaps = ms + slack * np.asarray(raw) / sum(raw) * 0.999
-    a0 = draw(st.floats(-math.pi, math.pi))
-    angles = (a0 + np.cumsum(gaps) + math.pi) % (2 * math.pi) - math.pi
-    arms = [Arm(angle=float(a),
-                gap=draw(st.floats(0.0, CFG.gap_max)),
-                lanes_in=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
-                lanes_out=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
-                lane_width=draw(st.floats(CFG.lane_width_min, CFG.lane_width_max)))
-            for a in angles]
-    c = draw(st.tuples(st.floats(-100, 100), st.floats(-100, 100)))
-    S = pack_state(Intersection(center=np.asarray(c), arms=arms))
-    rows = arm_rows(S)   # keep slot order random, like a chain after removals
-    perm = np.asarray(draw(st.permutations(list(range(n)))))
-    rows[:] = rows[perm]
-    return S
 
 
 def _lq(S_from, S_to, kind):
@@ -62,7 +45,7 @@ def test_every_move_keeps_the_model_valid(S, kind, seed):
 
 
 @SET
-@given(states(), st.sampled_from([K.ROTATE, K.SHIFT, K.CHANGE_GAP, K.WIDTH]),
+@given(states(), st.sampled_from([ROTATE, SHIFT, CHANGE_GAP, WIDTH]),
        st.integers(0, 2 ** 31 - 2))
 def test_continuous_moves_are_symmetric(S, kind, seed):
     ok, lq, S2 = propose_move(S, kind, P, TAB.logqn, seed)
@@ -70,17 +53,17 @@ def test_continuous_moves_are_symmetric(S, kind, seed):
         return
     assert lq == 0.0
     changed = np.flatnonzero(S2 != S)
-    if kind == K.SHIFT:
+    if kind == SHIFT:
         assert set(changed) <= {0, 1}
         assert np.hypot(*(S2[:2] - S[:2])) <= CFG.shift_max + 1e-9
     else:
         assert len(changed) <= 1   # one parameter of one arm
         if len(changed):
             i = changed[0]
-            step = {K.ROTATE: math.radians(CFG.rotate_max_deg), K.CHANGE_GAP: CFG.gap_step,
-                    K.WIDTH: CFG.width_step}[kind]
+            step = {ROTATE: math.radians(CFG.rotate_max_deg), CHANGE_GAP: CFG.gap_step,
+                    WIDTH: CFG.width_step}[kind]
             d = S2[i] - S[i]
-            if kind == K.ROTATE:
+            if kind == ROTATE:
                 d = (d + math.pi) % (2 * math.pi) - math.pi
             assert abs(d) <= step + 1e-9    # the reverse step lies in the same range
     assert _lq(S, S2, kind) == _lq(S2, S, kind)
@@ -89,15 +72,15 @@ def test_continuous_moves_are_symmetric(S, kind, seed):
 def _apply_lane_op(S, k, entering, add, variant):
     """-> (S2, log Hastings ratio) of lane-move variant 0 border, 1 median, 2 rescale."""
     S2 = S.copy()
-    i = K.HDR + k * K.STRIDE
-    j = i + (K.NIN if entering else K.NOUT)
+    i = HDR + k * STRIDE
+    j = i + (NIN if entering else NOUT)
     S2[j] += 1 if add else -1
     if variant == 1:
-        S2[i + K.GAP] += -S[i + K.WID] if add else S[i + K.WID]
+        S2[i + GAP] += -S[i + WID] if add else S[i + WID]
     if variant == 2:     # same road width: w' = w n / n', Jacobian n / n'
         if S2[j] < 1:
             return S2, math.nan    # no such proposal (matches nothing)
-        S2[i + K.WID] = S[i + K.WID] * S[j] / S2[j]
+        S2[i + WID] = S[i + WID] * S[j] / S2[j]
         return S2, math.log(S[j] / S2[j])
     return S2, 0.0
 
@@ -105,7 +88,7 @@ def _apply_lane_op(S, k, entering, add, variant):
 @SET
 @given(states(), st.integers(0, 2 ** 31 - 2))
 def test_lane_move_has_its_reverse(S, seed):
-    ok, lq, S2 = propose_move(S, K.LANE, P, TAB.logqn, seed)
+    ok, lq, S2 = propose_move(S, LANE, P, TAB.logqn, seed)
     if not ok:
         return
     found = False
@@ -130,7 +113,7 @@ def test_lane_move_rescale_keeps_road_width():
     S = pack_state(Intersection(center=np.zeros(2), arms=arms))
     seen = 0
     for seed in range(400):
-        ok, lq, S2 = propose_move(S, K.LANE, P, TAB.logqn, seed)
+        ok, lq, S2 = propose_move(S, LANE, P, TAB.logqn, seed)
         if not ok or lq == 0.0:
             continue
         rows, rows2 = arm_rows(S), arm_rows(S2)
@@ -147,20 +130,20 @@ def test_lane_move_rescale_keeps_road_width():
 @SET
 @given(states(), st.integers(0, 2 ** 31 - 2))
 def test_add_arm_ratio_matches_reference(S, seed):
-    ok, lq, S2 = propose_move(S, K.ADD_ARM, P, TAB.logqn, seed)
+    ok, lq, S2 = propose_move(S, ADD_ARM, P, TAB.logqn, seed)
     if not ok:
         return
     n2 = int(S2[2])
     assert n2 == int(S[2]) + 1
-    assert np.array_equal(S2[:K.HDR + (n2 - 1) * K.STRIDE][3:], S[3:K.HDR + (n2 - 1) * K.STRIDE])
-    expect = _lq(S2, S, K.REMOVE_ARM) - _lq(S, S2, K.ADD_ARM)
+    assert np.array_equal(S2[:HDR + (n2 - 1) * STRIDE][3:], S[3:HDR + (n2 - 1) * STRIDE])
+    expect = _lq(S2, S, REMOVE_ARM) - _lq(S, S2, ADD_ARM)
     assert abs(lq - expect) < 1e-9
 
 
 @SET
 @given(states(), st.integers(0, 2 ** 31 - 2))
 def test_remove_arm_ratio_matches_reference(S, seed):
-    ok, lq, S2 = propose_move(S, K.REMOVE_ARM, P, TAB.logqn, seed)
+    ok, lq, S2 = propose_move(S, REMOVE_ARM, P, TAB.logqn, seed)
     n = int(S[2])
     if n <= CFG.min_arms:
         assert not ok
@@ -171,13 +154,13 @@ def test_remove_arm_ratio_matches_reference(S, seed):
     assert len(missing) == 1
     # the reverse proposal: add exactly the removed arm to S2
     S_back = S2.copy()
-    S_back[K.HDR + (n - 1) * K.STRIDE: K.HDR + n * K.STRIDE] = missing[0]
+    S_back[HDR + (n - 1) * STRIDE: HDR + n * STRIDE] = missing[0]
     S_back[2] = n
-    rev = _lq(S2, S_back, K.ADD_ARM)
+    rev = _lq(S2, S_back, ADD_ARM)
     if not ok:
         assert rev == -math.inf     # rejected only when the add move cannot propose it
         return
-    assert abs(lq - (rev - _lq(S, S2, K.REMOVE_ARM))) < 1e-9
+    assert abs(lq - (rev - _lq(S, S2, REMOVE_ARM))) < 1e-9
     assert sorted(map(tuple, arm_rows(S_back))) == sorted(map(tuple, rows))
 
 
@@ -187,44 +170,32 @@ def test_add_then_remove_round_trip_is_detailed_balance_consistent():
     S = pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=0.0), Arm(angle=2.0)]))
     hits = 0
     for seed in rng.integers(0, 2 ** 31 - 2, 200):
-        ok, lq_add, S2 = propose_move(S, K.ADD_ARM, P, TAB.logqn, int(seed))
+        ok, lq_add, S2 = propose_move(S, ADD_ARM, P, TAB.logqn, int(seed))
         if not ok:
             continue
         S_rm = S2.copy()
         lq_rm = None
         for s2 in range(200):   # find the removal of the added arm (slot 2)
-            ok2, lq, S3 = propose_move(S2, K.REMOVE_ARM, P, TAB.logqn, s2)
-            if ok2 and np.array_equal(S3[:K.HDR + 2 * K.STRIDE], S[:K.HDR + 2 * K.STRIDE]) \
+            ok2, lq, S3 = propose_move(S2, REMOVE_ARM, P, TAB.logqn, s2)
+            if ok2 and np.array_equal(S3[:HDR + 2 * STRIDE], S[:HDR + 2 * STRIDE]) \
                     and int(S3[2]) == 2:
                 S_rm, lq_rm = S3, lq
                 break
         assert lq_rm is not None
         assert abs(lq_add + lq_rm) < 1e-9
-        assert np.array_equal(S_rm[:K.HDR + 2 * K.STRIDE], S[:K.HDR + 2 * K.STRIDE])
+        assert np.array_equal(S_rm[:HDR + 2 * STRIDE], S[:HDR + 2 * STRIDE])
         hits += 1
     assert hits > 50
-
-
-def test_pack_unpack_round_trip():
-    inter = Intersection(center=np.array([1.0, 2.0]),
-                         arms=[Arm(angle=0.5, gap=1.0, lanes_in=2, lanes_out=3, lane_width=3.2),
-                               Arm(angle=-2.0, gap=0.0, lanes_in=1, lanes_out=1, lane_width=3.6)])
-    back = unpack_state(pack_state(inter))
-    assert np.allclose(back.center, inter.center)
-    for a, b in zip(inter.arms, back.arms):
-        assert (a.lanes_in, a.lanes_out) == (b.lanes_in, b.lanes_out)
-        assert math.isclose(a.angle, b.angle) and math.isclose(a.gap, b.gap)
-        assert math.isclose(a.lane_width, b.lane_width)
 
 
 def test_move_frequencies_follow_algorithm_1():
     """omega ~ U[0,1] picks the paper's moves with their probabilities (+ width)."""
     S = pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=a) for a in (0.0, 2.0, -2.0)]))
-    C = np.zeros((K.MAXA, 0))
+    C = np.zeros((MAXA, 0))
     stats = np.zeros(2 * len(MOVE_NAMES), np.int64)
     z = np.zeros(0)
     n = 20000
-    K.run_chain(S.copy(), C, 0.0, 0.0, S.copy(), -np.inf, P, TAB.logPA, TAB.logPn, TAB.arm_const,
+    run_chain(S.copy(), C, 0.0, 0.0, S.copy(), -np.inf, P, TAB.logPA, TAB.logPn, TAB.arm_const,
                 TAB.logqn, TAB.cumqn, z, z, z, z, np.zeros(0, np.bool_), z, z, z, z, n,
                 np.ones(n), 1, stats)
     counts = stats[0::2] / n
@@ -235,7 +206,7 @@ def test_move_frequencies_follow_algorithm_1():
 
 
 @SET
-@given(states(), st.sampled_from([K.ROTATE, K.CHANGE_GAP, K.WIDTH]), st.integers(0, 2 ** 31 - 2),
+@given(states(), st.sampled_from([ROTATE, CHANGE_GAP, WIDTH]), st.integers(0, 2 ** 31 - 2),
        st.integers(0, 7))
 def test_focused_arm_moves_change_the_focus_arm_and_stay_symmetric(S, kind, seed, focus):
     """The descent's focus (``P_FOCUS``): with probability 1 every arm move picks that slot
@@ -243,13 +214,13 @@ def test_focused_arm_moves_change_the_focus_arm_and_stay_symmetric(S, kind, seed
     on the state, so the move keeps Hastings factor 0."""
     n = int(S[2])
     Pf = P.copy()
-    Pf[K.P_FOCUS], Pf[K.P_FOCUS_P] = focus, 1.0
+    Pf[P_FOCUS], Pf[P_FOCUS_P] = focus, 1.0
     S2 = np.empty_like(S)
-    ok, lq, k = K.propose_kind(S, S2, Pf, TAB.logqn, TAB.cumqn, kind, seed)
+    ok, lq, k = propose_kind(S, S2, Pf, TAB.logqn, TAB.cumqn, kind, seed)
     assert lq == 0.0
     if focus < n:
         assert k == focus
         changed = np.flatnonzero(S2 != S)
-        assert all(K.HDR + focus * K.STRIDE <= i < K.HDR + (focus + 1) * K.STRIDE for i in changed)
+        assert all(HDR + focus * STRIDE <= i < HDR + (focus + 1) * STRIDE for i in changed)
     else:
         assert 0 <= k < n

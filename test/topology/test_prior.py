@@ -6,23 +6,24 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 
-from intersection_estimator import _kernels as K
 from intersection_estimator.model import Arm, Intersection
-from intersection_estimator.moves import arm_rows, pack_state
-from intersection_estimator.prior import (ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const,
-                                          count_log_table, log_prior_reference)
-from intersection_estimator.topology import TopologyConfig, _Tables
+from intersection_estimator.topology import TopologyConfig
+from intersection_estimator.topology.config import Tables
+from intersection_estimator.topology.prior import (ARM_COUNT_PRIOR, LANE_COUNT_PRIOR,
+                                                   arm_log_const, count_log_table, log_prior)
+from intersection_estimator.topology.state import MAXA, arm_rows, pack_state
+from reference.prior import log_prior_reference
 
-from test_moves import states
+from .strategies import states
 
-TAB = _Tables(TopologyConfig())
+TAB = Tables(TopologyConfig())
 
 
 def test_default_tables_are_distributions():
     for t in (ARM_COUNT_PRIOR, LANE_COUNT_PRIOR):
         assert math.isclose(sum(t), 1.0, abs_tol=1e-5)
         assert min(t) >= 0 and t[0] == 0.0
-    assert len(ARM_COUNT_PRIOR) == K.MAXA + 1
+    assert len(ARM_COUNT_PRIOR) == MAXA + 1
 
 
 def test_priors_favour_fewer_lanes_but_allow_benchmark_counts():
@@ -44,7 +45,7 @@ def test_count_table_renormalises_on_bounds():
 def test_compiled_prior_equals_reference(S):
     rows = arm_rows(S)
     ref = log_prior_reference(rows[:, 2], rows[:, 3], TAB.logPA, TAB.logPn, TAB.arm_const)
-    assert abs(K.log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const) - ref) < 1e-9
+    assert abs(log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const) - ref) < 1e-9
 
 
 def test_prior_is_permutation_invariant_and_penalises_lanes():
@@ -53,10 +54,10 @@ def test_prior_is_permutation_invariant_and_penalises_lanes():
     S2 = S1.copy()
     rows = arm_rows(S2)
     rows[:] = rows[::-1].copy()
-    lp = K.log_prior(S1, TAB.logPA, TAB.logPn, TAB.arm_const)
-    assert math.isclose(lp, K.log_prior(S2, TAB.logPA, TAB.logPn, TAB.arm_const))
+    lp = log_prior(S1, TAB.logPA, TAB.logPn, TAB.arm_const)
+    assert math.isclose(lp, log_prior(S2, TAB.logPA, TAB.logPn, TAB.arm_const))
     a[0].lanes_in = 4
-    assert K.log_prior(pack_state(Intersection(np.zeros(2), a)), TAB.logPA, TAB.logPn,
+    assert log_prior(pack_state(Intersection(np.zeros(2), a)), TAB.logPA, TAB.logPn,
                        TAB.arm_const) < lp
 
 
@@ -66,7 +67,7 @@ def test_arm_constant_is_the_uniform_densities():
     assert math.isclose(arm_log_const(4.0, 3.0, 3.5, False), -math.log(2 * math.pi * 4.0))
 
 
-@pytest.mark.parametrize('field,value', [('arm_count_prior', (0.0,) * (K.MAXA + 1)),
+@pytest.mark.parametrize('field,value', [('arm_count_prior', (0.0,) * (MAXA + 1)),
                                          ('lane_count_prior', (1.0, 0.0, 0.0)),
                                          ('arm_count_prior', (0.5, 0.5))])
 def test_invalid_prior_tables_are_rejected(field, value):

@@ -13,6 +13,12 @@ import numpy as np
 
 from intersection_estimator.model import ENTERING, LEAVING, Arm, Intersection
 from intersection_estimator.observations import Detections
+from intersection_estimator.topology import PreprocessConfig
+
+#: The preprocessing settings these tests were written for (before PreprocessConfig was
+#: derived from TopologyConfig, its defaults): 2 m square voxels, unscaled weights, no
+#: near-center drop.
+LEGACY_PREPROCESS = PreprocessConfig(voxel_size=2.0, weight_scale=1.0, min_center_dist=0.0)
 
 
 def easy_intersection(n_arms: int = 4, lanes=((1, 1),) * 4, center=(5.0, -3.0),
@@ -101,3 +107,13 @@ def same_topology(a: Intersection, b: Intersection | None, tol_deg: float = 10.0
         if math.degrees(min(d)) > tol_deg or (x.lanes_in, x.lanes_out) != (y.lanes_in, y.lanes_out):
             return False
     return True
+
+
+#: Three scenes the estimator, descent and support tests share.
+EASY = [
+    easy_intersection(4, lanes=((1, 1), (2, 1), (1, 2), (2, 2)), gap=0.5),
+    easy_intersection(3, lanes=((1, 1), (2, 2), (1, 1)), angles_deg=[-100, 20, 150],
+                      center=(-40.0, 25.0), width=3.25),
+    easy_intersection(5, lanes=((1, 1), (1, 1), (2, 1), (1, 1), (1, 2)),
+                      angles_deg=[-170, -100, -20, 50, 120]),
+]

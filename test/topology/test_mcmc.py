@@ -4,16 +4,18 @@ import math
 
 import numpy as np
 
-from intersection_estimator import _kernels as K
-from intersection_estimator.anneal import Chain, advance, temperatures
-from intersection_estimator.likelihood import log_likelihood_reference
-from intersection_estimator.moves import pack_state
-from intersection_estimator.topology import TopologyConfig, TopologyEstimator, _Tables
+from intersection_estimator.topology import TopologyConfig, TopologyEstimator
+from intersection_estimator.topology.config import Tables
+from intersection_estimator.topology.likelihood import full_loglik
+from intersection_estimator.topology.mcmc import advance, temperatures
+from intersection_estimator.topology.prior import log_prior
+from intersection_estimator.topology.state import MAXA, Chain, pack_state
+from reference.likelihood import log_likelihood_reference
 
-from topology_scenes import easy_intersection, scene
+from .scenes import easy_intersection, scene
 
 CFG = TopologyConfig()
-TAB = _Tables(CFG)
+TAB = Tables(CFG)
 
 
 def test_schedule_is_geometric_then_constant():
@@ -25,9 +27,9 @@ def test_schedule_is_geometric_then_constant():
 
 def _chain(obs, inter):
     S = pack_state(inter)
-    C = np.zeros((K.MAXA, len(obs)))
-    ll = float(K.full_loglik(S, TAB.P, *obs.kernel_args(), C))
-    lp = float(K.log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const))
+    C = np.zeros((MAXA, len(obs)))
+    ll = float(full_loglik(S, TAB.P, *obs.kernel_args(), C))
+    lp = float(log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const))
     return Chain(S=S, C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
                  stats=np.zeros(14, np.int64))
 
@@ -52,7 +54,7 @@ def test_same_seed_same_chain_and_best_is_the_best_visited():
     assert a.best_lpost == b.best_lpost
     assert a.best_lpost >= a.ll + a.lp
     best_ll = log_likelihood_reference(a.best_S, obs, TAB.P)
-    best_lp = K.log_prior(a.best_S, TAB.logPA, TAB.logPn, TAB.arm_const)
+    best_lp = log_prior(a.best_S, TAB.logPA, TAB.logPn, TAB.arm_const)
     assert abs(a.best_lpost - (best_ll + best_lp)) < 1e-9
     assert a.stats[0::2].sum() == 3000
 

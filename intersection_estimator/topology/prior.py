@@ -27,11 +27,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
-from ._kernels import MAXA
+from .state import HDR, MAXA, NIN, NOUT, STRIDE
 
 __all__ = ['ARM_COUNT_PRIOR', 'LANE_COUNT_PRIOR', 'count_log_table', 'arm_log_const',
-           'log_prior_reference']
+           'log_prior']
 
 _REAL_ARMS = {2: 0.60, 3: 0.30, 4: 0.08, 5: 0.02}
 _SIM_ARMS = {3: 1 / 3, 4: 1 / 3, 5: 1 / 3}
@@ -71,10 +72,16 @@ def arm_log_const(gap_max: float, w_min: float, w_max: float, sample_width: bool
     return c
 
 
-def log_prior_reference(n_lanes_in, n_lanes_out, log_pa, log_pn, arm_const) -> float:
-    """Plain-Python log P(I) (reference for the compiled :func:`_kernels.log_prior`)."""
-    n = len(n_lanes_in)
-    lp = log_pa[n] + math.lgamma(n + 1.0) + n * arm_const
-    for a, b in zip(n_lanes_in, n_lanes_out):
-        lp += log_pn[int(a)] + log_pn[int(b)]
-    return float(lp)
+@njit(cache=True)
+def log_prior(S, logPA, logPn, arm_const):
+    """log P(I) = log P(|A|) + log |A|! + sum_arms [log P(n_in) + log P(n_out) + const].
+
+    ``|A|!`` makes it the density of the unordered arm set; ``arm_const`` holds the
+    uniform (non-informative) densities of angle, gap and lane width (paper §II-C1).
+    """
+    n = int(S[2])
+    lp = logPA[n] + math.lgamma(n + 1.0) + n * arm_const
+    for k in range(n):
+        i = HDR + k * STRIDE
+        lp += logPn[int(S[i + NIN])] + logPn[int(S[i + NOUT])]
+    return lp

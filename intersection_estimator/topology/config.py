@@ -1,0 +1,372 @@
+"""Configuration of the topology step (paper §II): :class:`TopologyConfig`, the
+preprocessing subset :class:`PreprocessConfig` derived from it, and :class:`Tables`, the
+prior / proposal / kernel tables a config implies (computed once per estimator).
+
+Every parameter has one entry in :data:`RANGES`: its allowed interval (``[`` / ``]``
+closed, ``(`` / ``)`` open; a bound may name another parameter) and what it means, with
+its unit. ``validate()`` checks them in field order, then the rules that involve several
+parameters. What was tried and measured for the defaults: ``docs/tuning.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, make_dataclass
+import math
+import re
+
+import numpy as np
+
+from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
+from .refit import log_floor_table
+from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_D2_CUT,
+                    P_FINE_P, P_FINE_SCALE, P_FLOOR, P_FOCUS, P_FOCUS_P, P_GAP_MAX,
+                    P_GAP_STEP, P_LANE_NORM, P_LANE_SUM, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
+                    P_MIN_LANES, P_MIN_SEP, P_ROT, P_SAMPLE_W, P_SHIFT, P_SPLIT_SPAN,
+                    P_TRAFFIC, P_W_DEFAULT, P_W_MAX, P_W_MIN, P_W_STEP)
+
+__all__ = ['TopologyConfig', 'PreprocessConfig', 'PREPROCESS_FIELDS', 'RANGES', 'Tables']
+
+# name -> (allowed interval, meaning [unit]); see the module docstring
+RANGES = {
+    # move probabilities (Algorithm 1), normalised to sum 1
+    'p_rotate': ('[0, 1]', 'probability of the rotate-arm move'),
+    'p_shift': ('[0, 1]', 'probability of the shift-center move'),
+    'p_gap': ('[0, 1]', 'probability of the change-gap move'),
+    'p_arm': ('[0, 1]', 'probability of the add/remove-arm move'),
+    'p_lane': ('[0, 1]', 'probability of the add/remove-lane move'),
+    'p_width': ('[0, 1]', 'probability of the lane-width move (beyond the paper; 0: width fixed '
+                'at lane_width)'),
+    # move ranges (Algorithm 1)
+    'rotate_max_deg': ('(0, 180]', 'largest rotation of an arm [deg]'),
+    'shift_max': ('(0, 100]', 'largest shift of the center [m]'),
+    'gap_step': ('(0, 20]', 'largest change of a median gap [m]'),
+    'width_step': ('(0, 2]', 'largest change of a lane width [m]'),
+    'fine_step_prob': ('[0, 1]', 'probability that a continuous move uses the fine range'),
+    'fine_step_scale': ('(0, 1]', 'fine range as a share of the move range'),
+    'split_span_deg': ('[0, 180]', "add-arm 'split': offset U[min_sep, min_sep + this] from an "
+                       'arm [deg]'),
+    # model bounds (§II-B)
+    'min_sep_deg': ('[1, 120]', 'smallest angle between two arms [deg]'),
+    'min_arms': (f'[1, {MAXA}]', 'fewest arms of an intersection'),
+    'max_arms': (f'[min_arms, {MAXA}]', 'most arms of an intersection'),
+    'min_lanes': ('[1, max_lanes]', 'fewest lanes per driving direction (no one-way roads)'),
+    'max_lanes': ('[min_lanes, inf)', 'most lanes per driving direction'),
+    'gap_max': ('(0, 30]', 'widest median gap [m]'),
+    'lane_width': ('[lane_width_min, lane_width_max]', 'lane width of a new arm, and of every '
+                   'arm when p_width = 0 [m]'),
+    'lane_width_min': ('[1, lane_width_max)', 'narrowest lane [m]'),
+    'lane_width_max': ('(lane_width_min, 6]', 'widest lane [m]'),
+    'traffic_side': ('[-1, 1]', '+1 right-hand traffic, -1 left-hand'),
+    # prior (§II-C1, prior.py)
+    'arm_count_prior': (None, f'P(|A| = i), i = 0..{MAXA}'),
+    'lane_count_prior': (None, 'P(lanes per direction = i), i = 0..len-1'),
+    # likelihood (§II-C2)
+    'sigma_track': ('[0.01, 20]', 'lateral sigma of a trajectory part\'s mean point [m]'),
+    'sigma_point': ('[0.01, 20]', 'lateral sigma of a detection (raw / heading voxel) [m]'),
+    'sigma_angle_deg': ('[0.1, 90]', 'heading sigma of a trajectory part / detection [deg]'),
+    'pca_radius': ('[1, 50]', 'initial center: radius of the local PCA of radar voxels [m]'),
+    'min_arm_support': ('[0, inf)', 'reported arms explain at least this many vehicle passages'),
+    'clutter_floor': ('(0, 1)', 'uniform outlier density relative to the peak density'),
+    'cut_sigma2': ('[1, 700]', 'densities below exp(-cut_sigma2) count as 0'),
+    'lane_sum': (None, 'sum the density over lanes (paper eq.) instead of the closest lane'),
+    'lane_norm': ('[0, 2]', 'density divided by (lanes of that arm and direction) ** this'),
+    # preprocessing (§II-A)
+    'voxel_size': ('[0.05, 50]', 'edge of square voxels (rows before arms are known) [m]'),
+    'voxel_length': ('[0, 100]', 'arm-aligned voxels: length along the arm (0: square) [m]'),
+    'voxel_width': ('[0.05, 20]', 'arm-aligned voxels: width across the arm [m]'),
+    'straight_run': (None, 'drop arm-aligned voxels without occupied neighbours along the arm'),
+    'voxel_merge': ('[1, 20]', 'radar: merge this many along-arm voxels'),
+    'heading_voxel_merge': ('[1, 20]', 'lidar / camera rows: merge this many along-arm voxels'),
+    'heading_sectors': ('[1, 64]', 'square heading voxels: sectors of 360/n deg'),
+    'passage_gap': ('[0, 60]', 'stamps farther apart are another vehicle passage (0: weights '
+                    'in detections) [s]'),
+    'weight_power': ('[0, 2]', 'voxel weight = scale * passages ** power'),
+    'weight_scale': ('(0, 100]', 'voxel weight = scale * passages ** power'),
+    'min_doppler': ('[0, 50]', 'radar rows with smaller |Doppler| are static [m/s]'),
+    'min_rcs': ('[-inf, inf]', 'radar rows with a smaller RCS are clutter (NaN kept) [dBsm]'),
+    'min_rcs_static': ('[-inf, inf]', 'slow (crossing) radar rows kept from this RCS [dBsm]'),
+    'keep_unknown_direction': (None, 'keep radar rows of unknown driving direction (d = 0)'),
+    'min_radial_cos': ('[0, 1)', 'radar rows with smaller |<radial, line of sight>| are dropped'),
+    'min_part_points': ('[1, 1000]', 'trajectory parts with fewer points are dropped'),
+    'min_part_length': ('[0, 100]', 'trajectory parts with a shorter extent are dropped [m]'),
+    'min_track_speed': ('[0, 50]', 'tracks never faster than this are static (false) [m/s]'),
+    'trim_turn_deg': ('[0, 90]', 'keep the straight run of a trajectory part (0: whole part, '
+                      'paper) [deg]'),
+    'min_center_dist': ('[0, 100]', 'observations closer to the center are dropped (vehicles '
+                        'turn inside the box; lanes are straight rays, §II-B) [m]'),
+    'arm_reach': ('[1, 100]', 'rows farther from every arm axis are voxelised along rays '
+                  '(arm not found yet) [m]'),
+    'recenter_threshold': ('(0, inf)', 're-preprocess when the best center moved more [m]'),
+    'recenter_window': ('[0, inf)', '... checked during this many samples after new data'),
+    # annealing (mcmc.py)
+    't_start': ('(0, 1e4]', 'temperature at sample 0'),
+    't_end': ('(0, t_start]', 'temperature from anneal_samples on'),
+    'anneal_samples': ('[1, inf)', 'length of the geometric schedule [samples]'),
+    'chains': ('[1, 16]', 'independent chains (own RNG streams, one observation set)'),
+    'chains_tracked': ('[1, 16]', '... when the data hold trajectories'),
+    'init_peak_frac': ('(0, 1]', 'init: direction-histogram peaks above this share of the top'),
+    'refit_every': ('[0, inf)', 'refit every arm every this many samples (0: never) (refit.py)'),
+    'refit_sweeps': ('[0, 10]', 'sweeps of each refit over the arms'),
+    'polish_samples': ('[0, inf)', 'first samples of a new chain: continuous moves only'),
+    'reheat_fraction': ('[0, 1]', 'on new data: back to this share of the schedule'),
+    # descent (descent.py)
+    'descent_rounds': ('[0, 10]', 'rounds of the greedy descent at the end of the schedule '
+                       '(0: off)'),
+    'descent_samples': ('[1, 1e6]', 'continuous moves per descent candidate'),
+    'descent_temp': ('(0, 1]', 'temperature of those moves'),
+    'descent_screen': ('[0, inf)', 'lane candidates this many nats behind the best state get '
+                       'no moves [nats]'),
+    'descent_prune': ('[0, inf)', 'a run stops once this many nats x (share of moves left)^2 '
+                      'behind [nats]'),
+    'descent_focus': ('[0, 1]', 'share of a lane candidate\'s arm moves on its changed arm'),
+    'descent_top': ('[0, 1000]', 'only the best this many lane candidates get moves (0: all)'),
+    # anytime API
+    'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
+    'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),
+    'converge_tol': ('[0, inf)', '... of more than this [nats]'),
+}
+
+_INTERVAL = re.compile(r'^([\[(])\s*([^,]+?)\s*,\s*([^\]\)]+?)\s*([\])])$')
+
+
+def _bound(cfg, text: str) -> float:
+    return float(getattr(cfg, text)) if text.isidentifier() and text != 'inf' else float(text)
+
+
+def _check_range(cfg, name: str) -> None:
+    """Raise ValueError unless ``cfg.<name>`` lies in its :data:`RANGES` interval."""
+    interval, what = RANGES[name]
+    if interval is None:
+        return
+    opn, lo, hi, cls = _INTERVAL.match(interval).groups()
+    v = getattr(cfg, name)
+    lo, hi = _bound(cfg, lo), _bound(cfg, hi)
+    ok = (lo < v if opn == '(' else lo <= v) and (v < hi if cls == ')' else v <= hi)
+    if not ok:
+        raise ValueError(f'{type(cfg).__name__}.{name}={v!r} outside {interval} ({what})')
+
+
+def _need(cfg, name: str, ok: bool, rule: str) -> None:
+    if not ok:
+        raise ValueError(f'{type(cfg).__name__}.{name}={getattr(cfg, name)!r}: needs {rule}')
+
+
+@dataclass(frozen=True)
+class TopologyConfig:
+    """All parameters of the topology step (meaning and unit of each: :data:`RANGES`);
+    defaults follow the paper where it gives one."""
+
+    # move probabilities (Algorithm 1)
+    p_rotate: float = 0.40
+    p_shift: float = 0.20
+    p_gap: float = 0.10
+    p_arm: float = 0.15
+    p_lane: float = 0.15
+    p_width: float = 0.10
+    # move ranges (Algorithm 1)
+    rotate_max_deg: float = 6.0
+    shift_max: float = 6.0
+    gap_step: float = 1.8
+    width_step: float = 0.25
+    fine_step_prob: float = 0.5
+    fine_step_scale: float = 0.1
+    split_span_deg: float = 60.0
+    # model bounds
+    min_sep_deg: float = 30.0
+    min_arms: int = 2
+    max_arms: int = 6
+    min_lanes: int = 1
+    max_lanes: int = 6
+    gap_max: float = 4.0
+    lane_width: float = 3.5
+    lane_width_min: float = 2.75
+    lane_width_max: float = 4.0
+    traffic_side: int = 1
+    # prior
+    arm_count_prior: tuple = ARM_COUNT_PRIOR
+    lane_count_prior: tuple = LANE_COUNT_PRIOR
+    # likelihood
+    sigma_track: float = 0.5
+    sigma_point: float = 1.2
+    sigma_angle_deg: float = 5.0
+    pca_radius: float = 8.0
+    min_arm_support: float = 2.5
+    clutter_floor: float = 0.01
+    cut_sigma2: float = 30.0
+    lane_sum: bool = False
+    lane_norm: float = 0.5
+    # preprocessing
+    voxel_size: float = 3.0
+    voxel_length: float = 10.0
+    voxel_width: float = 1.0
+    straight_run: bool = True
+    voxel_merge: int = 3
+    heading_voxel_merge: int = 2
+    heading_sectors: int = 8
+    passage_gap: float = 1.0
+    weight_power: float = 1.0
+    weight_scale: float = 0.3
+    min_doppler: float = 0.5
+    min_rcs: float = 0.0
+    min_rcs_static: float = 5.0
+    keep_unknown_direction: bool = True
+    min_radial_cos: float = 0.25
+    min_part_points: int = 3
+    min_part_length: float = 5.0
+    min_track_speed: float = 3.0
+    trim_turn_deg: float = 15.0
+    min_center_dist: float = 20.0
+    arm_reach: float = 18.0
+    recenter_threshold: float = 2.0
+    recenter_window: int = 2500
+    # annealing
+    t_start: float = 1.0
+    t_end: float = 0.2
+    anneal_samples: int = 5000
+    chains: int = 1
+    chains_tracked: int = 2
+    init_peak_frac: float = 0.12
+    refit_every: int = 1000
+    refit_sweeps: int = 1
+    polish_samples: int = 1000
+    reheat_fraction: float = 0.3
+    # descent
+    descent_rounds: int = 2
+    descent_samples: int = 250
+    descent_temp: float = 1e-3
+    descent_screen: float = 4.5
+    descent_prune: float = 3.0
+    descent_focus: float = 0.8
+    descent_top: int = 0
+    # anytime API
+    chunk: int = 500
+    converge_window: int = 2000
+    converge_tol: float = 0.5
+
+    def validate(self) -> 'TopologyConfig':
+        """Raise ValueError naming the first parameter outside its allowed range."""
+        for f in fields(self):
+            _check_range(self, f.name)
+        _need(self, 'p_rotate', sum(getattr(self, n) for n in _MOVE_P) > 0,
+              'a positive sum of the move probabilities')
+        _need(self, 'max_arms', self.max_arms * self.min_sep_deg <= 360,
+              'max_arms * min_sep_deg <= 360')
+        _need(self, 'max_lanes', self.max_lanes <= len(self.lane_count_prior) - 1,
+              'max_lanes <= len(lane_count_prior) - 1')
+        _need(self, 'traffic_side', self.traffic_side in (1, -1), 'one of 1, -1')
+        _need(self, 'arm_count_prior', len(self.arm_count_prior) == MAXA + 1
+              and min(self.arm_count_prior) >= 0
+              and sum(self.arm_count_prior[self.min_arms:self.max_arms + 1]) > 0,
+              f'{MAXA + 1} non-negative probabilities with mass on [min_arms, max_arms]')
+        _need(self, 'lane_count_prior', min(self.lane_count_prior) >= 0
+              and sum(self.lane_count_prior[self.min_lanes:self.max_lanes + 1]) > 0,
+              'non-negative probabilities with mass on [min_lanes, max_lanes]')
+        _check_flags(self)
+        return self
+
+    @property
+    def sample_width(self) -> bool:
+        """Is the lane width sampled (width move on), or fixed at ``lane_width``?"""
+        return self.p_width > 0
+
+    def preprocess_config(self) -> 'PreprocessConfig':
+        """The preprocessing parameters of this config."""
+        return PreprocessConfig(**{n: getattr(self, n) for n in PREPROCESS_FIELDS})
+
+    def kernel_params(self, continuous_only: bool = False) -> np.ndarray:
+        """The kernel parameter vector ``P`` (:mod:`.state`); ``continuous_only``: without
+        the dimension moves (add/remove arm / lane)."""
+        P = np.zeros(NPARAM)
+        p = np.array([getattr(self, n) for n in _MOVE_P])
+        if continuous_only:
+            p[3:5] = 0.0
+        cum = np.cumsum(p / p.sum())
+        P[P_MIN_SEP] = math.radians(self.min_sep_deg)
+        P[P_MIN_ARMS], P[P_MAX_ARMS] = self.min_arms, self.max_arms
+        P[P_MIN_LANES], P[P_MAX_LANES] = self.min_lanes, self.max_lanes
+        P[P_GAP_MAX] = self.gap_max
+        P[P_W_MIN], P[P_W_MAX] = self.lane_width_min, self.lane_width_max
+        P[P_ROT] = math.radians(self.rotate_max_deg)
+        P[P_SHIFT] = self.shift_max
+        P[P_GAP_STEP] = self.gap_step
+        P[P_W_STEP] = self.width_step
+        P[P_SPLIT_SPAN] = math.radians(self.split_span_deg)
+        P[[P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE]] = cum[:5]
+        P[P_FLOOR] = self.clutter_floor
+        P[P_TRAFFIC] = self.traffic_side
+        P[P_D2_CUT] = self.cut_sigma2
+        P[P_SAMPLE_W] = 1.0 if self.sample_width else 0.0
+        P[P_W_DEFAULT] = self.lane_width
+        P[P_LANE_NORM] = self.lane_norm
+        P[P_LANE_SUM] = 1.0 if self.lane_sum else 0.0
+        P[P_FOCUS], P[P_FOCUS_P] = 0.0, 0.0     # no focus arm (the descent sets one)
+        P[P_FINE_P] = self.fine_step_prob
+        P[P_FINE_SCALE] = self.fine_step_scale
+        return P
+
+
+_MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width')
+_FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction')
+
+
+def _check_flags(cfg) -> None:
+    for n in _FLAGS:
+        if hasattr(cfg, n):
+            _need(cfg, n, isinstance(getattr(cfg, n), (bool, np.bool_)), 'a bool')
+
+
+#: The parameters preprocessing (preprocess.py, voxels.py, init.py) reads.
+PREPROCESS_FIELDS = (
+    'sigma_track', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
+    'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
+    'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
+    'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
+    'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'arm_reach')
+
+
+def _preprocess_validate(self) -> 'PreprocessConfig':
+    """Raise ValueError naming the first parameter outside its allowed range."""
+    for f in fields(self):
+        _check_range(self, f.name)
+    _check_flags(self)
+    return self
+
+
+#: The preprocessing subset of :class:`TopologyConfig`: same names, defaults, ranges.
+PreprocessConfig = make_dataclass(
+    'PreprocessConfig',
+    [(f.name, f.type, field(default=f.default)) for f in fields(TopologyConfig)
+     if f.name in PREPROCESS_FIELDS],
+    frozen=True, namespace={'validate': _preprocess_validate, '__module__': __name__,
+                            '__doc__': 'Parameters of the preprocessing (paper §II-A): the '
+                            'subset PREPROCESS_FIELDS of TopologyConfig, same defaults.'})
+
+
+class Tables:
+    """Prior / proposal / kernel tables derived from a config (computed once): kernel
+    parameters ``P`` (``P_polish``: continuous moves only), log count priors ``logPA``,
+    ``logPn`` (and the lane-count proposal ``logqn``, ``cumqn``), the refit grids ``gaps``,
+    ``widths``, the per-arm log density constant ``arm_const`` and the refit's
+    :func:`.refit.log_floor_table`."""
+
+    def __init__(self, cfg: TopologyConfig):
+        self.P = cfg.kernel_params()
+        self.P_polish = cfg.kernel_params(continuous_only=True)
+        self.logPA = count_log_table(cfg.arm_count_prior, cfg.min_arms, cfg.max_arms, MAXA + 1)
+        size = cfg.max_lanes + 1
+        self.logPn = count_log_table(cfg.lane_count_prior, cfg.min_lanes, cfg.max_lanes, size)
+        self.logqn = self.logPn.copy()
+        self.cumqn = np.cumsum(np.exp(self.logqn))
+        self.gaps = np.linspace(0.0, cfg.gap_max, int(round(cfg.gap_max / 0.5)) + 1)
+        self.widths = (np.linspace(cfg.lane_width_min, cfg.lane_width_max, 6)
+                       if cfg.sample_width else np.zeros(0))
+        self.arm_const = arm_log_const(cfg.gap_max, cfg.lane_width_min, cfg.lane_width_max,
+                                       cfg.sample_width)
+        self.log_floor = log_floor_table(
+            cfg.clutter_floor, cfg.cut_sigma2 + cfg.lane_norm * math.log(cfg.max_lanes) + 1.0)
+
+    def focused(self, arm: int, share: float) -> np.ndarray:
+        """``P_polish`` with a share ``share`` of the arm moves on arm slot ``arm``."""
+        P = self.P_polish.copy()
+        P[P_FOCUS], P[P_FOCUS_P] = arm, share
+        return P

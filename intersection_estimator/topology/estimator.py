@@ -1,0 +1,267 @@
+"""Anytime topology estimator (paper §II): orchestration of the steps in this package.
+
+>>> est = TopologyEstimator(TopologyConfig(), seed=0)
+>>> est.set_observations(dets)
+>>> est.run(n_samples=5000)        # or est.run(time_budget_s=0.05)
+>>> est.best                       # model.Intersection | None
+
+One :meth:`TopologyEstimator.run` advances every chain (``chains``, or ``chains_tracked``
+when the data hold trajectories; each with its own RNG stream, all on one observation
+set, the best reported) in chunks: the initialisation (:mod:`.init`), then annealed
+Metropolis-Hastings (:mod:`.mcmc`), the first ``polish_samples`` with continuous moves
+only, an arm refit (:mod:`.refit`) after the polish and every ``refit_every`` samples, and
+the descent (:mod:`.descent`) when the schedule ends. The chains are kept across
+:meth:`TopologyEstimator.set_observations` calls (warm start, slightly re-heated); the
+observations are re-preprocessed (:mod:`.preprocess`) whenever the best center estimate
+has moved more than ``recenter_threshold`` since the last preprocessing. The reported
+estimate leaves out arms without support (:mod:`.support`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..model import Intersection
+from ..observations import Detections
+from .config import Tables, TopologyConfig
+from .descent import descend
+from .init import initial_state
+from .likelihood import ObservationSet
+from .mcmc import Posterior, acceptance_rates, temperatures
+from .moves import MOVE_NAMES
+from .preprocess import preprocess, radar_rows
+from .refit import refit_chain
+from .state import CX, CY, Chain, arm_angles, pack_state, unpack_state
+from .support import reported
+
+__all__ = ['TopologyEstimator', 'STATES']
+
+#: Values of :attr:`TopologyEstimator.state`.
+STATES = ('NO_DATA', 'CONVERGING', 'CONVERGED')
+
+
+def _as_rng(seed) -> np.random.Generator:
+    if isinstance(seed, np.random.Generator):
+        return seed
+    return np.random.default_rng(seed)
+
+
+class TopologyEstimator:
+    """Anytime MAP estimate of the intersection topology (paper §II)."""
+
+    def __init__(self, cfg: TopologyConfig | None = None, seed=0):
+        self.cfg = (cfg or TopologyConfig()).validate()
+        self._rng = _as_rng(seed)
+        self._tables = Tables(self.cfg)
+        self._pcfg = self.cfg.preprocess_config()
+        self.reset()
+
+    # ------------------------------------------------------------------ public API
+    def reset(self) -> None:
+        """Forget observations and chains."""
+        self._dets = Detections.empty()
+        self._radar = None                     # radar_rows(self._dets), made on first use
+        self._post = Posterior(self._tables, ObservationSet.empty())
+        self._pp_center = None                 # center of the last preprocessing
+        self._chains: list[Chain] = []
+        self._since_data = 0                   # samples since set_observations
+        self._polish_left = 0                  # continuous-only samples left
+        self._last_improve = 0                 # step of the last gain > converge_tol ...
+        self._ref_best = -math.inf             # ... to this log posterior
+        self._rep_key = self._rep = None       # cache of the reported estimate
+        self.samples_drawn = 0
+        self.preprocess_count = 0
+
+    def set_observations(self, dets: Detections) -> None:
+        """Replace the observation window; keep the chains (warm start, re-heated)."""
+        self._dets = dets.finite()
+        self._radar = None
+        self._since_data = 0
+        if not self._chains:
+            self._initialise()
+            return
+        self._preprocess(self._best_chain().best_S[CX:CY + 1].copy())
+        for c in self._chains:
+            c.step = min(c.step, int(self.cfg.reheat_fraction * self.cfg.anneal_samples))
+
+    def run(self, n_samples: int | None = None, time_budget_s: float | None = None) -> int:
+        """Advance every chain by ``n_samples`` (or until the wall-time budget is used);
+        returns the count drawn over all chains, including those of the descent at the end
+        of the schedule."""
+        if n_samples is None and time_budget_s is None:
+            raise ValueError('run() needs n_samples or time_budget_s')
+        if not self._chains and len(self._dets):
+            self._initialise()
+        if not self._chains or len(self._post.obs) == 0:
+            return 0
+        t0 = time.perf_counter()
+        deadline = math.inf if time_budget_s is None else t0 + time_budget_s
+        done = drawn = 0       # steps of each chain; samples drawn by all (and descents)
+        chunk = self.cfg.chunk   # with a budget: ~250 samples of all chains between checks
+        if time_budget_s is not None:
+            chunk = max(1, min(chunk, 250) // len(self._chains))
+        while True:
+            m = chunk if n_samples is None else min(chunk, n_samples - done)
+            if self._polish_left > 0:
+                m = min(m, self._polish_left)
+            if m <= 0:
+                break
+            drawn += self._advance(m, deadline)
+            done += m
+            if time_budget_s is not None and time.perf_counter() - t0 >= time_budget_s:
+                break
+        return drawn
+
+    @property
+    def best(self) -> Intersection | None:
+        """Best (MAP) intersection so far, arms with lane width and confidence
+        ``1 - exp(-passages / 3)`` (vehicle passages the arm explains best); arms that
+        explain fewer than ``min_arm_support`` passages are left out (:mod:`.support`)."""
+        if not self._chains:
+            return None
+        S, conf, _ = self._reported()
+        return unpack_state(S, self.cfg.traffic_side, conf)
+
+    @property
+    def best_log_posterior(self) -> float:
+        """log P(I|Z) + const of :attr:`best`."""
+        return -math.inf if not self._chains else self._reported()[2]
+
+    @property
+    def state(self) -> str:
+        """One of :data:`STATES`."""
+        if not self._chains or len(self._post.obs) == 0:
+            return 'NO_DATA'
+        c = self._best_chain()
+        if (c.step >= self.cfg.anneal_samples
+                and c.step - self._last_improve >= self.cfg.converge_window):
+            return 'CONVERGED'
+        return 'CONVERGING'
+
+    @property
+    def observations(self) -> ObservationSet:
+        """The preprocessed observations currently scored."""
+        return self._post.obs
+
+    @property
+    def acceptance(self) -> dict:
+        """Per move kind over all chains: (proposed, accepted)."""
+        if not self._chains:
+            return {}
+        return acceptance_rates(sum(c.stats for c in self._chains))
+
+    @property
+    def n_chains(self) -> int:
+        return len(self._chains)
+
+    @property
+    def chain_summaries(self) -> list[dict]:
+        """Per chain: its best (MAP) state ``best`` (all arms), ``log_posterior`` and
+        ``acceptance`` (per move kind: proposed, accepted)."""
+        return [{'best': unpack_state(c.best_S, self.cfg.traffic_side),
+                 'log_posterior': c.best_lpost, 'acceptance': acceptance_rates(c.stats)}
+                for c in self._chains]
+
+    def log_posterior(self, inter: Intersection) -> float:
+        """log P(I|Z) + const of any intersection under the current observations."""
+        return self._post(pack_state(inter))
+
+    # ------------------------------------------------------------------ internals
+    def _best_chain(self) -> Chain:
+        """The chain with the best state so far (the first on ties)."""
+        return max(self._chains, key=lambda c: c.best_lpost)
+
+    def _initialise(self) -> None:
+        cfg = self.cfg
+        init = initial_state(self._dets, cfg, self._pcfg, self._preprocessed)
+        if init is None:
+            return
+        S, obs, obs_center = init
+        n = cfg.chains_tracked if self._dets.has_tracks else cfg.chains
+        self._chains = [Chain.start(S, 0, len(MOVE_NAMES)) for _ in range(n)]
+        self._polish_left = cfg.polish_samples
+        moved = np.hypot(*(S[CX:CY + 1] - obs_center)) > cfg.recenter_threshold
+        self._preprocess(S[CX:CY + 1].copy(), None if moved else obs, obs_center)
+        if cfg.polish_samples == 0:
+            for c in self._chains:
+                refit_chain(self._post, c, cfg.refit_sweeps)
+
+    def _preprocess(self, center, obs=None, obs_center=None) -> None:
+        """(Re-)preprocess around ``center`` (or adopt ``obs`` made around ``obs_center``)
+        and re-score every chain and its best state on the new observations."""
+        if obs is None:
+            obs = self._preprocessed(center, arm_angles(self._best_chain().best_S))
+            obs_center = center
+        self._post = Posterior(self._tables, obs)
+        self._pp_center = np.asarray(obs_center, float).copy()
+        self.preprocess_count += 1
+        for c in self._chains:
+            c.best_lpost = self._post(c.best_S)
+            self._post.rescore(c)
+        best = self._best_chain()
+        self._ref_best = best.best_lpost
+        self._last_improve = best.step
+
+    def _preprocessed(self, center, angles) -> ObservationSet:
+        if self._radar is None:
+            self._radar = radar_rows(self._dets, self._pcfg)
+        return preprocess(self._dets, center, self._pcfg, angles, self._radar)
+
+    def _advance(self, m: int, deadline: float) -> int:
+        """``m`` samples of every chain (+ refits, + the descent when the schedule ends),
+        the chains in lockstep; returns samples drawn."""
+        cfg, post = self.cfg, self._post
+        temps = temperatures(self._chains[0].step, m, cfg.t_start, cfg.t_end, cfg.anneal_samples)
+        P = self._tables.P_polish if self._polish_left > 0 else self._tables.P
+        was_polishing = self._polish_left > 0
+        self._polish_left = max(0, self._polish_left - m)
+        drawn = 0
+        for c in self._chains:
+            post.advance(c, m, temps, int(self._rng.integers(0, 2 ** 31 - 1)), P)
+            if was_polishing and self._polish_left == 0:
+                refit_chain(post, c, cfg.refit_sweeps)
+            elif cfg.refit_every and c.step // cfg.refit_every != (c.step - m) // cfg.refit_every:
+                refit_chain(post, c, cfg.refit_sweeps)
+            if c.step - m < cfg.anneal_samples <= c.step:
+                drawn += self._descend(c, deadline)
+            drawn += m
+        self.samples_drawn += drawn
+        self._since_data += m
+        self._track_convergence()
+        return drawn
+
+    def _descend(self, c: Chain, deadline: float) -> int:
+        """:func:`.descent.descend` from chain ``c``'s MAP state; ``c`` takes the result if
+        it scores higher. Returns samples drawn."""
+        res = descend(c.best_S, self.cfg, self._post, self._rng, deadline)
+        if res.lpost > c.best_lpost:
+            c.best_S[:] = res.S
+            c.best_lpost = res.lpost
+            c.S[:] = res.S
+            c.ll, _ = self._post.loglik(c.S, c.C)
+            c.lp = res.lpost - c.ll
+        return res.samples
+
+    def _track_convergence(self) -> None:
+        """Note a gain of more than ``converge_tol``; re-preprocess when the best center
+        moved more than ``recenter_threshold`` soon after new data."""
+        cfg, c = self.cfg, self._best_chain()
+        if c.best_lpost > self._ref_best + cfg.converge_tol:
+            self._ref_best = c.best_lpost
+            self._last_improve = c.step
+        center = c.best_S[CX:CY + 1]
+        if (self._since_data <= cfg.recenter_window
+                and np.hypot(*(center - self._pp_center)) > cfg.recenter_threshold):
+            self._preprocess(center.copy())
+
+    def _reported(self):
+        """(state, confidence per arm, log posterior) of the reported estimate (cached)."""
+        c = self._best_chain()
+        key = (c.best_S.tobytes(), self.preprocess_count)
+        if self._rep_key != key:
+            self._rep = reported(self._post, c.best_S, c.best_lpost, self.cfg)
+            self._rep_key = key
+        return self._rep

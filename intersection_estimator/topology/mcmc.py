@@ -1,0 +1,236 @@
+"""Metropolis-Hastings with simulated annealing (paper §II, Algorithm 1; Kirkpatrick 1983).
+
+A proposal ``I'`` from a move (:mod:`.moves`) is accepted with probability
+``min(1, [P(I'|Z) / P(I|Z)]^(1/T) * q(I|I') / q(I'|I))``; the temperature follows a
+geometric schedule from ``t_start`` to ``t_end`` over ``anneal_samples`` steps and then
+stays at ``t_end``. The best (MAP) state seen is kept. The chain loop is compiled
+(:func:`run_chain`, incremental likelihood); :class:`Posterior` scores a packed state in
+full on one observation set.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .likelihood import ObservationSet, all_columns, arm_column, full_loglik
+from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
+from .prior import log_prior
+from .state import MAXA, P_FLOOR, Chain
+
+__all__ = ['temperatures', 'advance', 'acceptance_rates', 'Posterior', 'run_chain',
+           'observation_maxima', 'rescore_arm']
+
+
+def temperatures(k0: int, n: int, t_start: float, t_end: float, anneal_samples: int) -> np.ndarray:
+    """Temperatures of steps ``k0 .. k0+n-1`` (geometric, then constant ``t_end``)."""
+    k = np.minimum(np.arange(k0, k0 + n, dtype=np.float64), anneal_samples)
+    frac = k / max(anneal_samples, 1)
+    return t_start * (t_end / t_start) ** frac
+
+
+def advance(chain: Chain, n: int, temps: np.ndarray, seed: int, P, logPA, logPn, arm_const,
+            logqn, cumqn, obs: ObservationSet) -> None:
+    """Draw ``n`` samples of ``chain`` in place (one compiled call, numba RNG seeded with
+    ``seed``)."""
+    ll, lp, best = run_chain(chain.S, chain.C, chain.ll, chain.lp, chain.best_S,
+                             chain.best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
+                             *obs.kernel_args(), n, temps, seed, chain.stats)
+    chain.ll, chain.lp, chain.best_lpost = float(ll), float(lp), float(best)
+    chain.step += n
+
+
+def acceptance_rates(stats: np.ndarray) -> dict:
+    """Per move: (proposed, accepted)."""
+    return {name: (int(stats[2 * i]), int(stats[2 * i + 1]))
+            for i, name in enumerate(MOVE_NAMES)}
+
+
+class Posterior:
+    """log P(I|Z) + const of packed states on one observation set (paper §II-C):
+    ``tables`` is a :class:`.config.Tables`, ``obs`` an :class:`ObservationSet`."""
+
+    def __init__(self, tables, obs: ObservationSet):
+        self.t = tables
+        self.obs = obs
+
+    def columns(self) -> np.ndarray:
+        """Fresh (zero) per-arm likelihood columns for this observation set."""
+        return np.zeros((MAXA, len(self.obs)))
+
+    def loglik(self, S, C=None):
+        """(log P(Z|I), columns): ``S`` scored in full, its columns written to ``C``."""
+        if C is None:
+            C = self.columns()
+        ll = float(full_loglik(S, self.t.P, *self.obs.kernel_args(), C))
+        return ll, C
+
+    def log_prior(self, S) -> float:
+        t = self.t
+        return float(log_prior(S, t.logPA, t.logPn, t.arm_const))
+
+    def __call__(self, S) -> float:
+        """log P(I|Z) + const of ``S`` (scored in full)."""
+        return self.loglik(S)[0] + self.log_prior(S)
+
+    def rescore(self, c: Chain) -> None:
+        """Chain ``c``'s current state scored in full (columns remade); its best state
+        takes the current one if that scores higher."""
+        if c.C.shape[1] != len(self.obs):
+            c.C = self.columns()
+        c.ll, _ = self.loglik(c.S, c.C)
+        c.lp = self.log_prior(c.S)
+        if c.ll + c.lp > c.best_lpost:
+            c.best_S[:] = c.S
+            c.best_lpost = c.ll + c.lp
+
+    def advance(self, c: Chain, n: int, temps: np.ndarray, seed: int, P=None) -> None:
+        """:func:`advance` of chain ``c`` on this posterior (``P``: the tables' by default)."""
+        t = self.t
+        advance(c, n, temps, seed, t.P if P is None else P, t.logPA, t.logPn, t.arm_const,
+                t.logqn, t.cumqn, self.obs)
+
+
+@njit(cache=True, fastmath=True)
+def observation_maxima(C, n, wts, floor, M, AM, Lg):
+    """Per observation: best density over arms ``M``, its arm ``AM`` (-1: none) and the
+    log-likelihood term ``Lg = w log(M + floor)``; returns their sum."""
+    ll = 0.0
+    for i in range(wts.shape[0]):
+        m = 0.0
+        am = -1
+        for j in range(n):
+            if C[j, i] > m:
+                m = C[j, i]
+                am = j
+        M[i] = m
+        AM[i] = am
+        Lg[i] = wts[i] * math.log(m + floor)
+        ll += Lg[i]
+    return ll
+
+
+@njit(cache=True, fastmath=True)
+def rescore_arm(C, n, k, col, has_col, wts, floor, M, AM, Lg, idx, nM, nAM, nLg):
+    """Log-likelihood change when arm slot ``k`` gets column ``col`` (``has_col``) or is
+    removed (not ``has_col``). Only observations whose best arm could change are
+    re-scored: those whose best arm is ``k``, or that ``col`` explains better than their
+    current best. Changed rows go to ``idx[:count]`` with new values in ``nM, nAM, nLg``.
+    Returns (delta, count).
+    """
+    delta = 0.0
+    cnt = 0
+    for i in range(wts.shape[0]):
+        c = col[i] if has_col else 0.0
+        if AM[i] == k:
+            m = c
+            am = k if has_col and c > 0.0 else -1
+            for j in range(n):
+                if j != k and C[j, i] > m:
+                    m = C[j, i]
+                    am = j
+        elif c > M[i]:
+            m = c
+            am = k
+        else:
+            continue
+        if m == M[i] and am == AM[i]:
+            continue
+        lg = wts[i] * math.log(m + floor)
+        idx[cnt] = i
+        nM[cnt] = m
+        nAM[cnt] = am
+        nLg[cnt] = lg
+        delta += lg - Lg[i]
+        cnt += 1
+    return delta, cnt
+
+
+@njit(cache=True, nogil=True)   # inputs are served meanwhile (node.py)
+def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
+              ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats):
+    """Metropolis-Hastings with simulated annealing (paper §II, Algorithm 1).
+
+    Mutates ``S`` (chain state), ``C`` (per-arm density columns of ``S``) and
+    ``best_S``; ``temps[t]`` is the temperature of step ``t``. The likelihood is
+    incremental: a move of one arm recomputes only that arm's column and re-scores only
+    the observations whose best arm could change (see :func:`rescore_arm`); a center
+    shift recomputes everything. ``stats[kind*2]`` counts proposals, ``stats[kind*2+1]``
+    acceptances. Returns (ll, lp, best_lpost); ``ll`` is re-summed exactly at the end.
+
+    Length (over 80 lines): the Metropolis-Hastings loop with its incremental bookkeeping;
+    the accept branch updates six per-observation arrays in place, which a helper call per
+    accepted move would have to pass back.
+    """
+    np.random.seed(seed)
+    S2 = np.empty_like(S)
+    nobs = ox.shape[0]
+    floor = P[P_FLOOR]
+    col = np.empty(nobs)
+    C2 = np.empty_like(C)
+    M = np.empty(nobs)
+    AM = np.empty(nobs, np.int64)
+    Lg = np.empty(nobs)
+    M2 = np.empty(nobs)
+    AM2 = np.empty(nobs, np.int64)
+    Lg2 = np.empty(nobs)
+    idx = np.empty(nobs, np.int64)
+    nM = np.empty(nobs)
+    nAM = np.empty(nobs, np.int64)
+    nLg = np.empty(nobs)
+    ll = observation_maxima(C, int(S[2]), wts, floor, M, AM, Lg)
+    for step in range(n_steps):
+        ok, lq, kind, k = propose(S, S2, P, logqn, cumqn)
+        stats[2 * kind] += 1
+        if not ok:
+            continue
+        n2 = int(S2[2])
+        n = int(S[2])
+        cnt = 0
+        if kind == SHIFT:
+            all_columns(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2)
+            ll2 = observation_maxima(C2, n2, wts, floor, M2, AM2, Lg2)
+        elif kind == REMOVE_ARM:
+            d, cnt = rescore_arm(C, n, k, col, False, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
+            ll2 = ll + d
+        else:
+            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+            d, cnt = rescore_arm(C, n2, k, col, True, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
+            ll2 = ll + d
+        lp2 = log_prior(S2, logPA, logPn, arm_const)
+        a = (ll2 + lp2 - ll - lp) / temps[step] + lq
+        if a < 0.0 and math.log(np.random.random()) >= a:
+            continue
+        stats[2 * kind + 1] += 1
+        if kind == SHIFT:
+            for j in range(n2):
+                C[j, :] = C2[j, :]
+            M[:] = M2
+            AM[:] = AM2
+            Lg[:] = Lg2
+        else:
+            for q in range(cnt):
+                i = idx[q]
+                M[i] = nM[q]
+                AM[i] = nAM[q]
+                Lg[i] = nLg[q]
+            if kind == REMOVE_ARM:
+                if k != n - 1:
+                    C[k, :] = C[n - 1, :]
+                    for i in range(nobs):
+                        if AM[i] == n - 1:
+                            AM[i] = k
+            else:
+                C[k, :] = col
+        S[:] = S2
+        ll = ll2
+        lp = lp2
+        if ll + lp > best_lpost:
+            best_lpost = ll + lp
+            best_S[:] = S
+    ll = 0.0
+    for i in range(nobs):
+        ll += Lg[i]
+    return ll, lp, best_lpost

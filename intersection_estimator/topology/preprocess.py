@@ -1,0 +1,341 @@
+"""Preprocessing of the topology step (paper §II-A): detections -> ObservationSet.
+
+Three input kinds, decided per row of :class:`observations.Detections`:
+
+* tracked objects (``track_id >= 0``): each trajectory is split at its point closest to
+  the current center; each part becomes one observation (mean point, mean direction,
+  weight 1). Parts that are too short (false tracks of static clutter) are dropped.
+* radar (finite ``doppler``, no id): clutter filter (|doppler| and RCS), driving direction
+  from the Doppler sign generalised with the center estimate -- with the line of sight
+  ``los = (p - s)/|p - s|`` and radial ``r = (p - c)/|p - c|`` a detection is *leaving* iff
+  ``doppler * <r, los> > 0`` (the paper's rule "v > 0 leaving, flipped behind the
+  sensor" is the special case of a sensor on an arm); rows with ``|<r, los>|`` small are
+  ambiguous and dropped. Then voxelisation per direction class (count-weighted voxels).
+* lidar / camera objects (finite ``heading``, no id, no doppler): voxelised per heading
+  sector with the mean heading as orientation.
+
+Voxels: :mod:`.voxels`; the initialisation (center, arms, lanes): :mod:`.init`. The
+trajectory split is compiled here (:func:`split_tracks`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..observations import Detections
+from .config import PreprocessConfig
+from .likelihood import ObservationSet
+from .state import wrap
+from .voxels import (RAYS, arm_voxel_set, assign_arms, radar_frame, radar_voxels,
+                     ray_voxel_set, voxelise)
+
+__all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations', 'RadarRows',
+           'radar_rows', 'radar_filter', 'heading_observations', 'preprocess', 'split_tracks',
+           'unit_vectors']
+
+
+def unit_vectors(vx, vy):
+    n = np.hypot(vx, vy)
+    ok = n > 1e-9
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(ok, vx / n, 0.0), np.where(ok, vy / n, 0.0), ok
+
+
+def _direction_class(x, y, hx, hy, center):
+    """+1 entering (moving toward the center), -1 leaving."""
+    return np.where(hx * (center[0] - x) + hy * (center[1] - y) > 0, 1.0, -1.0)
+
+
+def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
+    """Split trajectories at the point closest to ``center``; mean point + direction."""
+    sel = dets.track_id >= 0
+    if not sel.any():
+        return ObservationSet.empty()
+    tid, t, xy, hd = dets.track_id[sel], dets.t[sel], dets.xy[sel], dets.heading[sel]
+    sp = dets.speed[sel]
+    order = np.lexsort((t, tid))
+    tid, xy, hd, sp = tid[order], xy[order], hd[order], sp[order]
+    starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
+    ends = np.r_[starts[1:], len(tid)]
+    if cfg.min_track_speed > 0 and np.isfinite(sp).any():   # static (false) tracks
+        vmax = np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), starts)
+        moving = vmax >= cfg.min_track_speed
+        starts, ends = starts[moving], ends[moving]
+        if len(starts) == 0:
+            return ObservationSet.empty()
+    c = np.asarray(center, float)
+    if not np.isfinite(hd).all():      # rows without heading: direction from positions
+        for a, b in zip(starts, ends):
+            h = hd[a:b]
+            if not np.isfinite(h).all():
+                hd[a:b] = _path_heading(xy[a:b])
+    o = split_tracks(xy[:, 0].copy(), xy[:, 1].copy(), hd, starts, ends, float(c[0]), float(c[1]),
+                     cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5)
+    if len(o) == 0:
+        return ObservationSet.empty()
+    hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
+    d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
+    obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
+                         np.full(len(o), cfg.sigma_track),
+                         np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
+    return _drop_near_center(obs, c, cfg)
+
+
+def _path_heading(p: np.ndarray) -> np.ndarray:
+    """Heading from the positions (central differences) when the rows carry none."""
+    if len(p) < 2:
+        return np.zeros(len(p))
+    d = np.gradient(p, axis=0)
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+def radar_filter(dets: Detections, cfg: PreprocessConfig, moving_only: bool = True) -> np.ndarray:
+    """Mask of radar rows that survive the Doppler / RCS clutter filter (paper §II-A).
+
+    ``moving_only=False`` keeps rows with small |Doppler| whose RCS is known and at least
+    ``min_rcs_static`` (vehicles crossing the line of sight, not clutter)."""
+    rcs = dets.rcs
+    radar = (dets.track_id < 0) & np.isfinite(dets.doppler)
+    m = radar & (np.abs(dets.doppler) >= cfg.min_doppler)
+    m &= ~(np.isfinite(rcs) & (rcs < cfg.min_rcs))
+    if not moving_only and cfg.min_rcs_static < np.inf:
+        with np.errstate(invalid='ignore'):
+            m |= radar & np.isfinite(rcs) & (rcs >= cfg.min_rcs_static)
+    return m
+
+
+class RadarRows(NamedTuple):
+    """Radar rows surviving the clutter filter, center-free (see :func:`radar_rows`)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    t: np.ndarray
+    doppler: np.ndarray
+    sensor_x: np.ndarray
+    sensor_y: np.ndarray
+
+
+def radar_rows(dets: Detections, cfg: PreprocessConfig) -> RadarRows:
+    """The rows :func:`radar_observations` voxelises, filtered once per data set: callers
+    that preprocess the same detections around several centers pass it along."""
+    m = radar_filter(dets, cfg, moving_only=False)
+    return RadarRows(np.ascontiguousarray(dets.xy[m, 0]), np.ascontiguousarray(dets.xy[m, 1]),
+                     dets.t[m], dets.doppler[m], np.ascontiguousarray(dets.sensor_xy[m, 0]),
+                     np.ascontiguousarray(dets.sensor_xy[m, 1]))
+
+
+def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
+                       arm_angles=None, rows: RadarRows | None = None) -> ObservationSet:
+    """Doppler -> driving direction relative to ``center``, then voxelise per class.
+
+    With ``arm_angles`` (the current arms) the voxels are aligned with the nearest arm:
+    ``voxel_length`` along it, ``voxel_width`` across, so a voxel never mixes lanes yet
+    covers a long piece of one; voxels without an occupied neighbour voxel in the same
+    lateral band on both sides along the arm are dropped -- they are not on a straight
+    lane (turning vehicles inside the box, isolated clutter). Rows on no current arm
+    (farther than ``arm_reach`` from every arm's axis) are voxelised along :data:`RAYS`
+    from the center, so that an arm the chain has not found yet keeps its data. Frame,
+    voxels and the near-center drop run in one compiled pass (:func:`.voxels.radar_voxels`).
+    Without arms: square voxels.
+    """
+    rows = radar_rows(dets, cfg) if rows is None else rows
+    if not len(rows.t):
+        return ObservationSet.empty()
+    c = np.asarray(center, float)
+    if _arms_known(arm_angles, cfg):
+        vx, vy, dcls, cnt = radar_voxels(
+            rows.x, rows.y, rows.t, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]),
+            float(c[1]), np.asarray(arm_angles, float), float(cfg.arm_reach),
+            float(cfg.min_radial_cos), float(cfg.min_doppler), bool(cfg.keep_unknown_direction),
+            RAYS, float(cfg.voxel_length), float(cfg.voxel_width), bool(cfg.straight_run),
+            int(cfg.voxel_merge), float(cfg.passage_gap), float(cfg.min_center_dist))
+        return _radar_set(vx, vy, dcls, cnt, cfg)
+    _, _, _, group, cls = radar_frame(
+        rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]), float(c[1]),
+        np.zeros(0), float(cfg.arm_reach), float(cfg.min_radial_cos), float(cfg.min_doppler),
+        bool(cfg.keep_unknown_direction), np.zeros(0))
+    b = group == 2
+    vxy, vcls, cnt = voxelise(np.stack([rows.x[b], rows.y[b]], axis=1), cls[b],
+                              cfg.voxel_size, t=rows.t[b], gap=cfg.passage_gap)[:3]
+    dcls = np.select([vcls == 1, vcls == 0], [1.0, -1.0], 0.0)
+    obs = _radar_set(vxy[:, 0].copy(), vxy[:, 1].copy(), dcls, cnt, cfg)
+    return _drop_near_center(obs, c, cfg)
+
+
+def _radar_set(x, y, dcls, cnt, cfg: PreprocessConfig) -> ObservationSet:
+    """Radar voxels as observations: no orientation, direction class, weight from count."""
+    n = len(x)
+    z = np.zeros(n)
+    return ObservationSet(x, y, z, z.copy(), np.zeros(n, np.bool_), dcls,
+                          cfg.weight_scale * cnt ** cfg.weight_power,
+                          np.full(n, cfg.sigma_point), np.full(n, 1.0), cnt)
+
+
+def _arms_known(arm_angles, cfg: PreprocessConfig) -> bool:
+    """Are voxels aligned with arms (arms given and arm-aligned voxels configured)?"""
+    return arm_angles is not None and len(arm_angles) > 0 and cfg.voxel_length > 0
+
+
+def _on_arms(xy, c, arm_angles, cfg: PreprocessConfig):
+    """Nearest arm, s, t of every row and whether it lies on that arm: ahead of the center
+    and within ``arm_reach`` of its axis (lidar / camera rows; radar rows get the same
+    frame from :func:`.voxels.radar_frame`). Rows on no current arm are voxelised along
+    rays from the center (:func:`.voxels.ray_voxel_set`), so that an arm the chain has not found yet
+    keeps its data (aligned with a neighbouring arm they would look like crossing
+    traffic and be filtered out, and the arm could never be added)."""
+    n = len(xy)
+    if not _arms_known(arm_angles, cfg) or n == 0:
+        z = np.zeros(n)
+        return np.zeros(n, np.int64), z, z, np.zeros(n, bool)
+    arm, s, t = assign_arms(xy, c, np.asarray(arm_angles, float))
+    return arm, s, t, (s > 0) & (np.abs(t) <= cfg.arm_reach)
+
+
+def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
+                         arm_angles=None) -> ObservationSet:
+    """Lidar/camera rows (heading, no id, no Doppler) -> voxels with their mean heading.
+
+    With ``arm_angles``: arm-aligned voxels per direction class (entering iff the heading
+    points against the arm) and the straight-run filter, like radar; otherwise square
+    voxels per heading sector.
+    """
+    m = (dets.track_id < 0) & np.isfinite(dets.heading) & ~np.isfinite(dets.doppler)
+    if not m.any():
+        return ObservationSet.empty()
+    c = np.asarray(center, float)
+    xy, h, ts = dets.xy[m], dets.heading[m], dets.t[m]
+    vec = np.stack([np.cos(h), np.sin(h)], axis=1)
+    arm, s_arm, t_arm, on = _on_arms(xy, c, arm_angles, cfg)
+    parts = []
+    if on.any():
+        ang = np.asarray(arm_angles, float)
+        cls = (vec[:, 0] * np.cos(ang)[arm] + vec[:, 1] * np.sin(ang)[arm] < 0).astype(np.int64)
+        vxy, _, cnt, sv = arm_voxel_set(xy[on], cls[on], arm[on], s_arm[on], t_arm[on], ts[on],
+                                      cfg, vec[on], cfg.heading_voxel_merge)
+        parts.append((vxy, cnt, sv))
+    if (~on).any():
+        if on.any():   # arms known: the rest along rays from the center
+            rad = np.arctan2(xy[~on, 1] - c[1], xy[~on, 0] - c[0])
+            cls = (vec[~on, 0] * np.cos(rad) + vec[~on, 1] * np.sin(rad) < 0).astype(np.int64)
+            vxy, _, cnt, sv = ray_voxel_set(xy[~on], cls, c, ts[~on], cfg, vec[~on],
+                                          cfg.heading_voxel_merge)
+        else:
+            sector = np.floor((np.mod(h, 2 * math.pi)) / (2 * math.pi) * cfg.heading_sectors)
+            vxy, _, cnt, sv = voxelise(xy, sector.astype(np.int64) % cfg.heading_sectors,
+                                       cfg.voxel_size, vec, t=ts, gap=cfg.passage_gap)
+        parts.append((vxy, cnt, sv))
+    vxy, cnt, sv = (np.concatenate(p) for p in zip(*parts))
+    hx, hy, okh = unit_vectors(sv[:, 0], sv[:, 1])
+    d = _direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
+    obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, okh, d,
+                         cfg.weight_scale * cnt ** cfg.weight_power,
+                         np.full(len(vxy), cfg.sigma_point),
+                         np.full(len(vxy), math.radians(cfg.sigma_angle_deg)), cnt)
+    return _drop_near_center(obs, c, cfg)
+
+
+def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig) -> ObservationSet:
+    if cfg.min_center_dist <= 0 or len(obs) == 0:
+        return obs
+    return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist)
+
+
+def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
+               radar: RadarRows | None = None) -> ObservationSet:
+    """All observation kinds of ``dets`` for the current ``center`` (paper §II-A);
+    ``radar``: :func:`radar_rows` of ``dets.finite()`` when already at hand."""
+    dets = dets.finite()
+    return ObservationSet.concat([tracked_observations(dets, center, cfg),
+                                  radar_observations(dets, center, cfg, arm_angles, radar),
+                                  heading_observations(dets, center, cfg, arm_angles)])
+
+
+@njit(cache=True)
+def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
+    """Paper §II-A for tracked objects: split each trajectory at its point closest to the
+    center ``(cx, cy)`` and reduce each part to its mean point and mean direction.
+
+    Rows are sorted by (track, time); ``h`` is the heading per row. With ``tol > 0`` a part
+    is first cut to its straight run from the far end (moving average of ``win`` heading
+    deviations from the far-end direction below ``tol``): the turn inside the intersection
+    box would bias the mean point and direction. Returns (mx, my, vx, vy) per kept part.
+
+    Length (over 80 lines): one pass per trajectory (closest point, split, straight-run
+    trim, means); helpers would need the same dozen loop-carried variables.
+    """
+    nt = starts.shape[0]
+    out = np.empty((2 * nt, 4))
+    m = 0
+    for t in range(nt):
+        a = starts[t]
+        b = ends[t]
+        best = np.inf
+        imin = a
+        for i in range(a, b):
+            d = (x[i] - cx) ** 2 + (y[i] - cy) ** 2
+            if d < best:
+                best = d
+                imin = i
+        for part in range(2):
+            lo = a if part == 0 else imin
+            hi = imin + 1 if part == 0 else b
+            n = hi - lo
+            if n < min_pts:
+                continue
+            x0 = x[lo]
+            x1 = x[lo]
+            y0 = y[lo]
+            y1 = y[lo]
+            for i in range(lo, hi):
+                x0 = min(x0, x[i])
+                x1 = max(x1, x[i])
+                y0 = min(y0, y[i])
+                y1 = max(y1, y[i])
+            if math.hypot(x1 - x0, y1 - y0) < min_len:
+                continue
+            # far end first: entering part (0) starts far, leaving part (1) ends far
+            step = 1 if part == 0 else -1
+            first = lo if part == 0 else hi - 1
+            keep = n
+            if tol > 0.0:
+                k = max(3, n // 5)
+                sx = 0.0
+                sy = 0.0
+                for q in range(k):
+                    sx += math.cos(h[first + step * q])
+                    sy += math.sin(h[first + step * q])
+                ref = math.atan2(sy, sx)
+                dev = np.empty(n)
+                for q in range(n):
+                    dev[q] = abs(wrap(h[first + step * q] - ref))
+                half = win // 2
+                keep = n
+                for q in range(n):
+                    acc = 0.0
+                    for r in range(q - half, q - half + win):
+                        if 0 <= r < n:
+                            acc += dev[r]
+                    if acc / win > tol:
+                        keep = q
+                        break
+                keep = max(keep, min(n, 3))
+            mx = 0.0
+            my = 0.0
+            vx = 0.0
+            vy = 0.0
+            for q in range(keep):
+                i = first + step * q
+                mx += x[i]
+                my += y[i]
+                vx += math.cos(h[i])
+                vy += math.sin(h[i])
+            out[m, 0] = mx / keep
+            out[m, 1] = my / keep
+            out[m, 2] = vx
+            out[m, 3] = vy
+            m += 1
+    return out[:m]

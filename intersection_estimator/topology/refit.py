@@ -1,0 +1,274 @@
+"""Arm refit (beyond the paper): one arm's (gap, width, lane counts) jump to the best grid point.
+
+Single moves (:mod:`.moves`) rarely reach a joint change of lane count and width, so every
+``refit_every`` samples, after the polish phase of a new chain, and for every lane
+candidate of the descent (:mod:`.descent`) each arm is refitted with center and angles
+fixed. :func:`refit_arm` scores each (gap, width) grid point and lane count from a table of
+F(x) = log(exp(-x) + floor) (:func:`log_floor_table`, cubic Hermite pieces, 32 per unit,
+|error| < 1e-9), where x = energy + ``lane_norm`` log(lanes) is the observation's -log
+density under this arm: no exp or log in its inner loop. Observations whose best density
+under this arm cannot beat the other arms' (exp(-energy) <= other) are skipped up front.
+The table only steers the search: the chosen point is scored exactly and kept only if it
+is no worse (monotone in the posterior).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from numba import njit
+
+from .likelihood import arm_column, arm_frame, combine
+from .mcmc import Posterior
+from .state import (ANG, GAP, HDR, NARMS, NIN, NOUT, P_D2_CUT, P_FLOOR, P_GAP_MAX,
+                    P_LANE_NORM, P_LANE_SUM, P_MAX_LANES, P_MIN_LANES, P_TRAFFIC, P_W_MAX,
+                    STRIDE, WID, Chain)
+
+__all__ = ['LOG_FLOOR_INV_STEP', 'log_floor_table', 'refit_arm', 'refit_chain',
+           'refit_gap_width']
+
+
+def refit_chain(post: Posterior, c: Chain, sweeps: int) -> None:
+    """``sweeps`` rounds of :func:`refit_arm` over every arm of chain ``c``'s current
+    state (coordinate ascent, monotone), then ``c`` re-scored in full. No-op without
+    observations or with ``sweeps == 0``."""
+    if len(post.obs) == 0 or sweeps == 0:
+        return
+    t = post.t
+    for _ in range(sweeps):
+        for k in range(int(c.S[NARMS])):
+            refit_arm(c.S, k, t.P, t.logPn, *post.obs.kernel_args(), c.C, t.gaps, t.widths,
+                      t.log_floor)
+    post.rescore(c)
+
+
+def refit_gap_width(post: Posterior, S: np.ndarray, k: int):
+    """Arm ``k`` of ``S`` (changed in place) with gap and width at the best grid point for
+    its lane counts; returns ``(S, log posterior)``."""
+    t = post.t
+    C = post.columns()
+    post.loglik(S, C)
+    args = post.obs.kernel_args()
+    refit_arm(S, k, t.P, t.logPn, *args, C, t.gaps, t.widths, t.log_floor, True)
+    # refit_arm left C the columns of the refitted S: combine them, no second scoring
+    ll = float(combine(C, int(S[NARMS]), -1, C[0], False, args[-1], t.P[P_FLOOR]))
+    return S, ll + post.log_prior(S)
+
+
+#: Knots per unit of the table of F(x) = log(exp(-x) + floor) that :func:`refit_arm`
+#: interpolates (cubic Hermite: |error| < 1e-9, no exp / log in its inner loop).
+LOG_FLOOR_INV_STEP = 32.0
+
+
+@functools.lru_cache(maxsize=16)
+def log_floor_table(floor: float, xmax: float) -> np.ndarray:
+    """Cubic pieces (rows: knot j, columns: coefficients of u^0..u^3, u in [0, 1)) of
+    F(x) = log(exp(-x) + floor) on [0, xmax]: the log-density of an observation at
+    energy x plus the clutter floor."""
+    h = 1.0 / LOG_FLOOR_INV_STEP
+    x = np.arange(int(math.ceil(xmax / h)) + 3) * h
+    ex = np.exp(-x)
+    f = np.log(ex + floor)
+    d = -ex / (ex + floor) * h
+    f0, f1, d0, d1 = f[:-1], f[1:], d[:-1], d[1:]
+    T = np.stack([f0, d0, 3.0 * (f1 - f0) - 2.0 * d0 - d1, 2.0 * (f0 - f1) + d0 + d1], axis=1)
+    T.setflags(write=False)
+    return T
+
+
+#: fastmath without 'nnan' / 'ninf': refit_arm compares with infinite sentinels.
+FAST_FINITE = {'nsz', 'arcp', 'contract', 'afn', 'reassoc'}
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
+def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths, FT,
+              fixed_counts=False):
+    """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed
+    (with ``fixed_counts``: best gap and width for the lane counts in ``S``).
+
+    Deterministic coordinate ascent on the posterior (initialisation aid, beyond the
+    paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
+    each, the lane counts per direction are chosen independently (the likelihood of
+    entering and leaving observations separates given the other arms' columns). Writes
+    the best into ``S`` and arm ``k``'s column into ``C``; returns the posterior gain,
+    never negative: the choice is scored exactly and kept only if it is no worse. The
+    search reads log-densities from ``FT`` (:func:`log_floor_table`), the closest lane
+    only; the sum over lanes (``P_LANE_SUM``) takes exact logarithms.
+
+    Length (over 80 lines): the whole grid search over (gap, width) x lane counts runs on
+    per-observation scratch arrays made once; splitting it would pass a dozen of them per
+    call, and the inner loop is the refit's hot path.
+    """
+    n = int(S[2])
+    nobs = ox.shape[0]
+    i0 = HDR + k * STRIDE
+    a = S[i0 + ANG]
+    ux = math.cos(a)
+    uy = math.sin(a)
+    cut = P[P_D2_CUT]
+    ts = P[P_TRAFFIC]
+    beta = P[P_LANE_NORM]
+    lane_sum = P[P_LANE_SUM] > 0.0
+    floor = P[P_FLOOR]
+    lo = int(P[P_MIN_LANES])
+    hi = int(P[P_MAX_LANES])
+    if FT.shape[0] < (cut + beta * math.log(hi)) * LOG_FLOOR_INV_STEP + 1.0:
+        raise ValueError('refit_arm: log_floor_table too short for P_D2_CUT / lanes')
+    tl = np.empty(nobs)
+    base = np.empty(nobs)
+    dd = np.empty(nobs)
+    other = np.zeros(nobs)
+    for i in range(nobs):
+        s, t, d, e = arm_frame(i, S[0], S[1], ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
+        dd[i] = d
+        tl[i] = d * ts * t
+        base[i] = e + (isp[i] * s * s if s < 0.0 else 0.0)
+        m = 0.0
+        for j in range(n):
+            if j != k and C[j, i] > m:
+                m = C[j, i]
+        other[i] = m
+    # observations this arm can explain at all (others add a constant to every candidate),
+    # packed per driving direction (side 0 entering) in R[side, :, :nrel[side]]: lateral
+    # offset, base energy, 1/(2 sigma^2), weight, the other arms' best density o,
+    # log(o + floor), the energy cut (beyond it this arm cannot beat o: the closest
+    # lane's density exp(-e) / n**beta <= exp(-e)) and -log(o)
+    reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX]
+    R = np.empty((2, 8, nobs))
+    nrel = np.zeros(2, np.int64)
+    for i in range(nobs):
+        ci = cut
+        if other[i] > 0.0 and not lane_sum:
+            ci = min(cut, -math.log(other[i]))
+        if base[i] < ci and abs(tl[i]) < reach + math.sqrt(ci / isp[i]):
+            side = 0 if dd[i] > 0.0 else 1
+            r = nrel[side]
+            R[side, 0, r] = tl[i]
+            R[side, 1, r] = base[i]
+            R[side, 2, r] = isp[i]
+            R[side, 3, r] = wts[i]
+            R[side, 4, r] = other[i]
+            R[side, 5, r] = math.log(other[i] + floor)
+            R[side, 6, r] = ci
+            R[side, 7, r] = -math.log(other[i]) if other[i] > 0.0 else np.inf
+            nrel[side] += 1
+    acc = np.empty(hi + 1)
+    invn = np.empty(hi + 1)
+    blog = np.empty(hi + 1)
+    for nl in range(1, hi + 1):
+        invn[nl] = float(nl) ** -beta
+        blog[nl] = beta * math.log(float(nl))
+    ng = gaps.shape[0] + 1
+    nw = widths.shape[0] + 1
+    best = -np.inf
+    bg = S[i0 + GAP]
+    bw = S[i0 + WID]
+    bi = S[i0 + NIN]
+    bo = S[i0 + NOUT]
+    ni = lo
+    no = lo
+    for gi in range(ng):
+        g = gaps[gi] if gi < ng - 1 else S[i0 + GAP]
+        for wi in range(nw):
+            w = widths[wi] if wi < nw - 1 else S[i0 + WID]
+            tot = 0.0
+            for side in range(2):
+                sbest = -np.inf
+                sn = lo
+                n_lo = lo
+                n_hi = hi
+                if fixed_counts:
+                    n_lo = int(S[i0 + NIN]) if side == 0 else int(S[i0 + NOUT])
+                    n_hi = n_lo
+                for nl in range(n_lo, n_hi + 1):
+                    acc[nl] = logPn[nl]
+                Rt = R[side, 0]
+                Rb = R[side, 1]
+                Ri = R[side, 2]
+                Rw = R[side, 3]
+                Ro = R[side, 4]
+                Rl = R[side, 5]
+                Rc = R[side, 6]
+                Rx = R[side, 7]
+                for r in range(nrel[side]):
+                    # log-density relative to "no lane of this arm explains it" (the same
+                    # for every candidate, so left out): 0 unless this arm beats the others
+                    q = Rt[r] - 0.5 * g
+                    kf = math.floor(q / w)
+                    if kf < 0.0:
+                        kf = 0.0
+                    if not lane_sum:
+                        # closest lane: kf while it exists, else the outermost one, whose
+                        # distance grows as lanes are taken away -- count down and stop at
+                        # the first lane count that leaves it beyond the cut
+                        last = -1.0
+                        for nl in range(n_hi, n_lo - 1, -1):
+                            kk = kf if kf < nl - 1.0 else nl - 1.0
+                            if kk != last:
+                                last = kk
+                                dl = q - (kk + 0.5) * w
+                                e = Rb[r] + Ri[r] * dl * dl
+                                if e >= Rc[r]:
+                                    break
+                            # density exp(-x), x = e + beta log(nl): beats o iff x < -log(o);
+                            # its log-density log(exp(-x) + floor) from the table
+                            x = e + blog[nl]
+                            if x < Rx[r]:
+                                tj = x * LOG_FLOOR_INV_STEP
+                                j = int(tj)
+                                u = tj - j
+                                f = FT[j, 0] + u * (FT[j, 1] + u * (FT[j, 2] + u * FT[j, 3]))
+                                acc[nl] += Rw[r] * (f - Rl[r])
+                        continue
+                    # sum over lanes 0..nl-1 (the closest must be within the cut)
+                    cs = 0.0
+                    for nl in range(n_lo, n_hi + 1):
+                        for jl in range(0 if nl == n_lo else nl - 1, nl):   # the new lanes
+                            dj = q - (jl + 0.5) * w
+                            ej = Rb[r] + Ri[r] * dj * dj
+                            if ej < cut:
+                                cs += math.exp(-ej)
+                        kk = kf if kf < nl - 1.0 else nl - 1.0
+                        dl = q - (kk + 0.5) * w
+                        if Rb[r] + Ri[r] * dl * dl >= cut:
+                            continue
+                        v = cs * invn[nl]
+                        if v > Ro[r]:
+                            acc[nl] += Rw[r] * (math.log(v + floor) - Rl[r])
+                for nl in range(n_lo, n_hi + 1):
+                    if acc[nl] > sbest:
+                        sbest = acc[nl]
+                        sn = nl
+                tot += sbest
+                if side == 0:
+                    ni = sn
+                else:
+                    no = sn
+            if tot > best:
+                best = tot
+                bg = g
+                bw = w
+                bi = ni
+                bo = no
+    # posterior of the current arm parameters, for the gain
+    old = np.empty(STRIDE)
+    for q in range(STRIDE):
+        old[q] = S[i0 + q]
+    col = np.empty(nobs)
+    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+    cur = combine(C, n, k, col, True, wts, floor) + logPn[int(old[NIN])] + logPn[int(old[NOUT])]
+    S[i0 + GAP] = bg
+    S[i0 + WID] = bw
+    S[i0 + NIN] = bi
+    S[i0 + NOUT] = bo
+    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+    new = combine(C, n, k, col, True, wts, floor) + logPn[int(bi)] + logPn[int(bo)]
+    if new < cur:
+        for q in range(STRIDE):
+            S[i0 + q] = old[q]
+        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+        new = cur
+    C[k, :] = col
+    return new - cur

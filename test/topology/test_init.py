@@ -1,0 +1,60 @@
+"""Initialisation: meeting point of the driving lines, arm angles, lane guess."""
+
+import math
+
+import numpy as np
+import pytest
+
+from intersection_estimator.topology.init import (initial_arm_angles, initial_center,
+                                                  initial_lanes, seed_lines)
+from intersection_estimator.topology.preprocess import preprocess
+from reference.init import initial_center_reference, initial_lanes_reference
+
+from .scenes import LEGACY_PREPROCESS as CFG, easy_intersection, scene
+
+
+def test_initial_center_and_arms_from_driving_lines():
+    gt = easy_intersection(4, lanes=((2, 1), (1, 2), (1, 1), (2, 2)), center=(12.0, -7.0))
+    for mode in ('tracked', 'heading', 'raw'):
+        dets = scene(gt, mode, seed=1)
+        p, o, w = seed_lines(dets, CFG)
+        c = initial_center(p, o, w)
+        assert np.hypot(*(c - gt.center)) < 8.0, mode
+        ang = initial_arm_angles(p, o, w, c, math.radians(30), 6)
+        if mode != 'raw':
+            assert len(ang) == 4
+            for a in gt.arms:
+                assert min(abs((a.angle - b + math.pi) % (2 * math.pi) - math.pi) for b in ang) \
+                    < math.radians(5)
+
+
+def test_initial_lanes_recover_lane_counts():
+    gt = easy_intersection(4, lanes=((2, 1), (1, 3), (1, 1), (2, 2)), center=(0.0, 0.0),
+                           gap=1.0, width=3.25)
+    dets = scene(gt, 'tracked', seed=2)
+    obs = preprocess(dets, gt.center + 2.0, CFG)
+    c, params = initial_lanes(obs, gt.center + 2.0, [a.angle for a in gt.arms], 3.5, 6, 4.0,
+                              width_range=(2.75, 4.0))
+    assert np.hypot(*(c - gt.center)) < 0.5
+    assert [(p[1], p[2]) for p in params] == [(a.lanes_in, a.lanes_out) for a in gt.arms]
+
+
+@pytest.mark.parametrize('mode', ['raw', 'tracked', 'heading'])
+def test_compiled_initialisation_equals_the_numpy_reference(mode):
+    """initial_center (IRLS) and initial_lanes (lane guess) match the numpy code they
+    replaced: centers to 1e-9 m, gaps / widths to 1e-9, lane counts exactly."""
+    from intersection_estimator.sim import SimConfig, simulate_scenario
+    for seed in range(12):
+        dets = simulate_scenario(seed, SimConfig()).detections(mode)
+        p, o, w = seed_lines(dets, CFG)
+        c = initial_center(p, o, w)
+        np.testing.assert_allclose(c, initial_center_reference(p, o, w), rtol=0, atol=1e-9)
+        angles = initial_arm_angles(p, o, w, c, math.radians(30.0), 6)
+        obs = preprocess(dets, c, CFG, angles)
+        for wr in (None, (2.75, 4.0)):
+            c1, g1 = initial_lanes(obs, c, angles, 3.5, 6, 4.0, 1, width_range=wr)
+            c2, g2 = initial_lanes_reference(obs, c, angles, 3.5, 6, 4.0, 1, width_range=wr)
+            np.testing.assert_allclose(c1, c2, rtol=0, atol=1e-9)
+            assert [(n1, n2) for _, n1, n2, _ in g1] == [(n1, n2) for _, n1, n2, _ in g2]
+            np.testing.assert_allclose([(g, wd) for g, _, _, wd in g1],
+                                       [(g, wd) for g, _, _, wd in g2], rtol=0, atol=1e-9)

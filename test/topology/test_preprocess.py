@@ -1,0 +1,142 @@
+"""Preprocessing (paper §II-A): Doppler direction, clutter filter, voxels, trajectory split."""
+
+from dataclasses import replace
+import math
+
+import numpy as np
+
+from intersection_estimator.observations import Detections
+from intersection_estimator.topology.init import initial_center, seed_lines
+from intersection_estimator.topology.preprocess import (heading_observations, preprocess,
+                                                        radar_observations,
+                                                        tracked_observations)
+
+from .scenes import LEGACY_PREPROCESS as CFG, easy_intersection, scene
+
+
+def test_straight_trajectory_splits_at_closest_point():
+    """A vehicle crossing straight through the center gives one entering and one leaving
+    part with the mean point on each side and the driving direction."""
+    x = np.arange(-50.0, 50.5, 1.0)
+    xy = np.stack([x, np.full_like(x, -1.75)], axis=1)
+    dets = Detections.make(xy, t=np.arange(len(x)) * 0.1, heading=0.0, track_id=7)
+    obs = tracked_observations(dets, (0.0, 0.0), CFG)
+    assert len(obs) == 2
+    i_in = int(np.argmin(obs.x))
+    assert obs.x[i_in] < -20 and obs.x[1 - i_in] > 20
+    assert np.allclose(obs.y, -1.75) and np.allclose(obs.hx, 1.0) and np.allclose(obs.hy, 0.0)
+    assert obs.d[i_in] == 1.0 and obs.d[1 - i_in] == -1.0     # entering, then leaving
+
+
+def test_turn_is_trimmed_from_the_part():
+    """Entering along +x toward the center, then turning left: the entering part's mean
+    stays on the straight lane (the arc inside the box is trimmed)."""
+    s = np.arange(60.0, 10.0, -1.0)
+    p_in = np.stack([s, np.full_like(s, 1.75)], axis=1)
+    phi = np.linspace(-math.pi / 2, 0.0, 20)
+    arc = np.stack([10.0 * np.cos(phi) + 0.0, 10.0 * np.sin(phi) + 11.75], axis=1)[::-1] * [1, 1]
+    arc = np.stack([10.0 - 10.0 * np.sin(np.linspace(0, math.pi / 2, 20)),
+                    1.75 + 10.0 * (1 - np.cos(np.linspace(0, math.pi / 2, 20)))], axis=1)
+    xy = np.concatenate([p_in, arc])
+    d = np.gradient(xy, axis=0)
+    dets = Detections.make(xy, t=np.arange(len(xy)) * 0.1, heading=np.arctan2(d[:, 1], d[:, 0]),
+                           track_id=1)
+    trimmed = tracked_observations(dets, (0.0, 0.0), CFG)
+    whole = tracked_observations(dets, (0.0, 0.0), replace(CFG, trim_turn_deg=0.0))
+    k = int(np.argmax(trimmed.x))
+    assert abs(trimmed.y[k] - 1.75) < 0.05 and abs(trimmed.hy[k]) < 0.05
+    assert abs(whole.y[int(np.argmax(whole.x))] - 1.75) > abs(trimmed.y[k] - 1.75)
+
+
+def test_static_false_tracks_are_dropped():
+    rng = np.random.default_rng(0)
+    xy = rng.normal([30.0, 5.0], 0.8, (4, 2))
+    dets = Detections.make(xy, t=np.arange(4) * 0.1, heading=rng.uniform(-3, 3, 4), track_id=99)
+    assert len(tracked_observations(dets, (0.0, 0.0), CFG)) == 0
+
+
+def _radar(xy, dop, sensor, rcs=10.0):
+    return Detections.make(np.asarray(xy, float), doppler=dop, sensor_xy=sensor, rcs=rcs)
+
+
+def test_doppler_direction_rule_with_line_of_sight():
+    """Sensor on the arm at (30, -1.75) looking toward the center at (0, 0)."""
+    sensor = (30.0, -1.75)
+    cfg = replace(CFG, voxel_size=0.5)
+    # ahead of the sensor (between sensor and center): moving toward the center = toward
+    # the sensor's look direction = away from the sensor -> doppler > 0 -> entering
+    ahead = radar_observations(_radar([[15.0, 1.75]], 5.0, sensor), (0.0, 0.0), cfg)
+    assert ahead.d.tolist() == [1.0]
+    # behind the sensor: the paper's rule flips
+    behind = radar_observations(_radar([[50.0, 1.75]], 5.0, sensor), (0.0, 0.0), cfg)
+    assert behind.d.tolist() == [-1.0]
+    # beyond the center on the opposite arm: moving away from the sensor = leaving
+    far = radar_observations(_radar([[-30.0, -1.75]], 5.0, sensor), (0.0, 0.0), cfg)
+    assert far.d.tolist() == [-1.0]
+    # cross traffic seen at a right angle: direction unknown (d = 0), or dropped
+    side = radar_observations(_radar([[15.0, 15.0]], 5.0, (30.0, 0.0)), (0.0, 0.0),
+                              replace(CFG, min_radial_cos=0.25))
+    assert side.d.tolist() == [0.0]
+    side = radar_observations(_radar([[15.0, 15.0]], 5.0, (30.0, 0.0)), (0.0, 0.0),
+                              replace(CFG, min_radial_cos=0.25, keep_unknown_direction=False))
+    assert len(side) == 0
+
+
+def test_radar_clutter_filter():
+    sensor = (30.0, 0.0)
+    dets = Detections.concat([_radar([[10.0, 2.0]], 0.1, sensor, rcs=-5),   # static clutter
+                              _radar([[10.0, 2.0]], 6.0, sensor, rcs=-10),  # weak
+                              _radar([[12.0, 2.0]], 6.0, sensor, rcs=np.nan),
+                              _radar([[14.0, 2.0]], 6.0, sensor),
+                              _radar([[16.0, 2.0]], 0.1, sensor, rcs=12)])  # slow vehicle
+    obs = radar_observations(dets, (0.0, 0.0), replace(CFG, voxel_size=1.0))
+    assert sorted(zip(obs.x.round(1).tolist(), obs.d.tolist())) == [(12.0, 1.0), (14.0, 1.0),
+                                                                    (16.0, 0.0)]
+
+
+def test_heading_detections_are_voxelised_with_their_heading():
+    xy = np.array([[20.0, 1.0], [20.4, 1.2], [20.2, 1.1], [-20.0, -1.0]])
+    h = np.array([2.9, 2.85, 2.95, math.pi])
+    obs = heading_observations(Detections.make(xy, heading=h), (0.0, 0.0),
+                               replace(CFG, voxel_size=2.0))
+    assert len(obs) == 2
+    k = int(np.argmax(obs.x))
+    assert obs.w[k] == 3.0 * obs.w[1 - k] and abs(math.atan2(obs.hy[k], obs.hx[k]) - 2.9) < 1e-3
+    assert obs.d[k] == 1.0 and obs.d[1 - k] == -1.0   # toward / away from the center
+
+
+def test_empty_and_degenerate_inputs():
+    empty = Detections.empty()
+    assert len(preprocess(empty, (0, 0), CFG)) == 0
+    assert initial_center(*seed_lines(empty, CFG)) is None
+    one = Detections.make([[1.0, 2.0]], heading=0.0, track_id=0)
+    assert len(preprocess(one, (0, 0), CFG)) == 0
+
+
+def _corridor_weight(obs, center, angle, reach=12.0):
+    """Observation weight within ``reach`` of the ray from ``center`` at ``angle``, beyond 10 m."""
+    v = np.stack([obs.x - center[0], obs.y - center[1]], axis=1)
+    s = v @ np.array([math.cos(angle), math.sin(angle)])
+    t = v @ np.array([-math.sin(angle), math.cos(angle)])
+    return float(obs.w[(s > 10.0) & (np.abs(t) < reach)].sum())
+
+
+def test_an_arm_the_chain_has_not_found_keeps_its_radar_and_heading_data():
+    """Rows on no current arm are voxelised along rays, not along a neighbouring arm, where
+    the straight-run filter used to drop them all: the chain could never add that arm."""
+    inter = easy_intersection(4, lanes=((2, 2),) * 4)
+    angles = [a.angle for a in inter.arms]
+    for mode, fn in (('raw', radar_observations), ('heading', heading_observations)):
+        dets = scene(inter, mode, seed=3)
+        full = fn(dets, inter.center, CFG, angles)
+        for k in range(len(angles)):
+            missing = fn(dets, inter.center, CFG, angles[:k] + angles[k + 1:])
+            w_full = _corridor_weight(full, inter.center, angles[k])
+            assert w_full > 0
+            assert _corridor_weight(missing, inter.center, angles[k]) > 0.5 * w_full, (mode, k)
+
+
+
+
+
+
