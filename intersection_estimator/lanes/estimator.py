@@ -20,6 +20,7 @@ from .config import LaneConfig
 from .init import (arm_frames, assign_parts, connector_id, fit_frames, lane_id, lane_specs,
                    stop_distances, trajectories)
 from .likelihood import all_terms, assign_points, station_csr
+from . import mcmc as M
 from .mcmc import run_chain
 from .model import LaneGraph, build_graph
 from .prior import all_angles, angle_csr, log_prior
@@ -261,11 +262,19 @@ class LaneCourseEstimator:
 
     # ------------------------------------------------------------------ sampling
     def _params(self) -> np.ndarray:
+        """The parameter vector of :func:`.mcmc.run_chain`, filled by named slot."""
         c = self.config
-        return np.array([self._inv2s2(), self._eps(), 0.5 / c.sigma_delta ** 2, c.tau,
-                         c.width_min, c.width_max, c.step_center, c.step_border, c.split_max,
-                         c.p_center, c.p_border, c.p_split + c.p_merge, c.temp_start,
-                         c.temp_end, float(c.anneal_samples)])
+        prm = np.zeros(M.NPRM)
+        prm[M.PRM_INV2S2], prm[M.PRM_EPS] = self._inv2s2(), self._eps()
+        prm[M.PRM_INV2SD2], prm[M.PRM_TAU] = 0.5 / c.sigma_delta ** 2, c.tau
+        prm[M.PRM_WIDTH_MIN], prm[M.PRM_WIDTH_MAX] = c.width_min, c.width_max
+        prm[M.PRM_STEP_CENTER], prm[M.PRM_STEP_BORDER] = c.step_center, c.step_border
+        prm[M.PRM_SPLIT_MAX] = c.split_max
+        prm[M.PRM_P_CENTER], prm[M.PRM_P_BORDER] = c.p_center, c.p_border
+        prm[M.PRM_P_SWITCH] = c.p_split + c.p_merge
+        prm[M.PRM_TEMP_START], prm[M.PRM_TEMP_END] = c.temp_start, c.temp_end
+        prm[M.PRM_ANNEAL_SAMPLES] = float(c.anneal_samples)
+        return prm
 
     def _chain(self, n: int) -> None:
         g = self.graph

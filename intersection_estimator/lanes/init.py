@@ -348,16 +348,21 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
     return specs, pairs, index
 
 
-def arc_bezier(p0, t0, p1, t1, s):
-    """Cubic Bezier tangent to unit ``t0`` at ``p0`` and ``t1`` at ``p1``, evaluated at ``s``.
-
-    Handles ``h = chord * 2/3 tan(phi/4) / sin(phi/2)`` (at most chord/2) make it the
-    usual cubic approximation of a circular arc through the turn angle ``phi``.
-    """
-    chord = float(np.linalg.norm(p1 - p0))
-    phi = math.acos(float(np.clip(np.dot(t0, t1), -1.0, 1.0)))
+@njit(cache=True)
+def arc_handle(chord, cos_phi):
+    """Handle length of the cubic Bezier that approximates a circular arc through the turn
+    angle ``phi`` between its unit end tangents (``cos_phi = <t0, t1>``):
+    ``h = chord * 2/3 tan(phi/4) / sin(phi/2)``, at most chord/2 (chord/3 when straight).
+    The one copy of this formula (connectors, their initial shape, the stop-line paths)."""
+    phi = math.acos(min(1.0, max(-1.0, cos_phi)))
     ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
-    h = chord * min(ratio, 0.5)
+    return chord * min(ratio, 0.5)
+
+
+def arc_bezier(p0, t0, p1, t1, s):
+    """Cubic Bezier tangent to unit ``t0`` at ``p0`` and ``t1`` at ``p1``, evaluated at ``s``:
+    the usual cubic approximation of a circular arc (handles: :func:`arc_handle`)."""
+    h = arc_handle(float(np.linalg.norm(p1 - p0)), float(np.dot(t0, t1)))
     q0, q1 = p0 + h * t0, p1 - h * t1
     s = s[:, None]
     return ((1 - s) ** 3 * p0 + 3 * (1 - s) ** 2 * s * q0 + 3 * (1 - s) * s ** 2 * q1
@@ -371,9 +376,7 @@ def _connector_geometry(L0, R0, L1, R1, t0, t1, arc_shape, spacing, min_st):
     chord = math.hypot(c1[0] - c0[0], c1[1] - c0[1])
     h = 0.0
     if arc_shape:
-        phi = math.acos(min(1.0, max(-1.0, t0[0] * t1[0] + t0[1] * t1[1])))
-        ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
-        h = chord * min(ratio, 0.5)
+        h = arc_handle(chord, t0[0] * t1[0] + t0[1] * t1[1])
     q0, q1 = c0 + h * t0, c1 - h * t1         # h = 0: the straight chord
     m = 64
     s = np.linspace(0.0, 1.0, m)

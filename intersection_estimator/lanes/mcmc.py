@@ -22,12 +22,17 @@ from .likelihood import point_term, window_d2
 from .moves import merge, move_border, move_center, split, undo
 from .prior import station_angle
 
-__all__ = ['run_chain', 'PRM']
+__all__ = ['run_chain', 'NPRM', 'PRM_INV2S2', 'PRM_EPS', 'PRM_INV2SD2', 'PRM_TAU',
+           'PRM_WIDTH_MIN', 'PRM_WIDTH_MAX', 'PRM_STEP_CENTER', 'PRM_STEP_BORDER',
+           'PRM_SPLIT_MAX', 'PRM_P_CENTER', 'PRM_P_BORDER', 'PRM_P_SWITCH', 'PRM_TEMP_START',
+           'PRM_TEMP_END', 'PRM_ANNEAL_SAMPLES']
 
-# layout of the float parameter vector handed to the compiled loop
-PRM = ('inv2s2', 'eps', 'inv2sd2', 'tau', 'width_min', 'width_max', 'step_center',
-       'step_border', 'split_max', 'p_center', 'p_border', 'p_switch', 'temp_start',
-       'temp_end', 'anneal_samples')
+# Slots of the float parameter vector ``prm`` handed to the compiled loop: one named
+# index per value, the convention of the topology's ``P_*`` (topology/state.py).
+(PRM_INV2S2, PRM_EPS, PRM_INV2SD2, PRM_TAU, PRM_WIDTH_MIN, PRM_WIDTH_MAX, PRM_STEP_CENTER,
+ PRM_STEP_BORDER, PRM_SPLIT_MAX, PRM_P_CENTER, PRM_P_BORDER, PRM_P_SWITCH, PRM_TEMP_START,
+ PRM_TEMP_END, PRM_ANNEAL_SAMPLES) = range(15)
+NPRM = 15
 
 
 @njit(cache=True)
@@ -45,9 +50,11 @@ def run_chain(n, k0, seed, prm, P, axis, ref, home, users, nusers, st_normal, st
 
     Returns (accepted, log-posterior change of the final state, of the best state)."""
     np.random.seed(seed)
-    inv2s2, eps, inv2sd2, tau = prm[0], prm[1], prm[2], prm[3]
-    wmin, wmax, step_c, step_b, split_max = prm[4], prm[5], prm[6], prm[7], prm[8]
-    p_c, p_b, p_sw, T0, T1, n_anneal = prm[9], prm[10], prm[11], prm[12], prm[13], prm[14]
+    inv2s2, eps, inv2sd2, tau = prm[PRM_INV2S2], prm[PRM_EPS], prm[PRM_INV2SD2], prm[PRM_TAU]
+    wmin, wmax = prm[PRM_WIDTH_MIN], prm[PRM_WIDTH_MAX]
+    step_c, step_b, split_max = prm[PRM_STEP_CENTER], prm[PRM_STEP_BORDER], prm[PRM_SPLIT_MAX]
+    p_c, p_b, p_sw = prm[PRM_P_CENTER], prm[PRM_P_BORDER], prm[PRM_P_SWITCH]
+    T0, T1, n_anneal = prm[PRM_TEMP_START], prm[PRM_TEMP_END], prm[PRM_ANNEAL_SAMPLES]
     n_st, n_slots, n_pairs, n_ll, n_q = len(st_ll), len(ref), len(pair_a), len(delta), len(Q)
     p_tot = p_c + p_b + (p_sw if n_pairs > 0 else 0.0)
     n_shared = 0

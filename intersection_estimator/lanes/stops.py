@@ -7,7 +7,7 @@ The topology gives rays; where an arm's lanes end (and its connectors begin) is 
 part of it. ``init.stop_distances`` guesses it from the arm geometry; here we fit it:
 every trajectory with an entering and a leaving lane defines a path -- straight along
 its entering lane up to the stop line of arm ``a``, an arc-like cubic Bezier
-(``init.arc_bezier``) to the stop line of arm ``b``, straight out along its leaving
+(``init.arc_bezier``, handles ``init.arc_handle``) to the stop line of arm ``b``, straight out along its leaving
 lane. Coordinate descent over the arms, a 1-D grid search per arm, minimises the
 robust (Huber-like, clipped) squared distance of the trajectories' points near the
 intersection to their paths. Straight-through traffic hardly constrains the stop
@@ -21,6 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .init import arc_handle
 from .likelihood import seg_dist2
 
 __all__ = ['fit_stops', 'path_cost', 'complete_partial']
@@ -32,11 +33,7 @@ _EXT = 25.0       # straight extension before/after the connector [m]
 @njit(cache=True)
 def _path(p0x, p0y, t0x, t0y, p1x, p1y, t1x, t1y, out):
     """Polyline: straight in, arc-like Bezier, straight out (``out``: (_NB + 2, 2))."""
-    chord = math.hypot(p1x - p0x, p1y - p0y)
-    c = min(1.0, max(-1.0, t0x * t1x + t0y * t1y))
-    phi = math.acos(c)
-    ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
-    h = chord * min(ratio, 0.5)
+    h = arc_handle(math.hypot(p1x - p0x, p1y - p0y), t0x * t1x + t0y * t1y)
     q0x, q0y, q1x, q1y = p0x + h * t0x, p0y + h * t0y, p1x - h * t1x, p1y - h * t1y
     out[0, 0], out[0, 1] = p0x - _EXT * t0x, p0y - _EXT * t0y
     for i in range(_NB):
