@@ -16,6 +16,6 @@ its maths (like :mod:`..lanes`):
 """
 
 from .config import PreprocessConfig, TopologyConfig
-from .estimator import STATES, TopologyEstimator
+from .estimator import TopologyEstimator
 
-__all__ = ['TopologyConfig', 'TopologyEstimator', 'PreprocessConfig', 'STATES']
+__all__ = ['TopologyConfig', 'TopologyEstimator', 'PreprocessConfig']

@@ -37,10 +37,7 @@ from .refit import refit_chain
 from .state import CX, CY, Chain, arm_angles, pack_state, unpack_state
 from .support import reported
 
-__all__ = ['TopologyEstimator', 'STATES']
-
-#: Values of :attr:`TopologyEstimator.state`.
-STATES = ('NO_DATA', 'CONVERGING', 'CONVERGED')
+__all__ = ['TopologyEstimator']
 
 
 def _as_rng(seed) -> np.random.Generator:
@@ -132,7 +129,8 @@ class TopologyEstimator:
 
     @property
     def state(self) -> str:
-        """One of :data:`STATES`."""
+        """'NO_DATA', 'CONVERGING' or 'CONVERGED' (their message constants:
+        ``msg_adapters.topology.STATES``)."""
         if not self._chains or len(self._post.obs) == 0:
             return 'NO_DATA'
         c = self._best_chain()
@@ -183,8 +181,8 @@ class TopologyEstimator:
         n = cfg.chains_tracked if self._dets.has_tracks else cfg.chains
         self._chains = [Chain.start(S, 0, len(MOVE_NAMES)) for _ in range(n)]
         self._polish_left = cfg.polish_samples
-        moved = np.hypot(*(S[CX:CY + 1] - obs_center)) > cfg.recenter_threshold
-        self._preprocess(S[CX:CY + 1].copy(), None if moved else obs, obs_center)
+        near = np.hypot(*(S[CX:CY + 1] - obs_center)) <= cfg.recenter_threshold
+        self._preprocess(S[CX:CY + 1].copy(), obs if near else None, obs_center)
         if cfg.polish_samples == 0:
             for c in self._chains:
                 refit_chain(self._post, c, cfg.refit_sweeps)
