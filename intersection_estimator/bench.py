@@ -135,7 +135,9 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
         except Exception as e:  # noqa: BLE001 - one bad case must not stop a benchmark
             est, timing = {'error': f'{type(e).__name__}: {e}'}, {}
             tb = traceback.format_exc(limit=3)
-        timing['reference'] = SI.reference_once()[0]   # the speed index, in this process, now
+        ref = SI.after_case(timing.get('wall', 0.0))   # the speed index, in this process, now
+        if ref is not None:
+            timing['reference'] = ref
     if opts.lane_samples == 0:   # lane step skipped: score topology only
         gt = {**gt, 'lanes': []}
         if 'lanes' in est:

@@ -12,10 +12,14 @@ The reference has the two shapes the estimator's time goes into:
 * a numpy pass of the preprocessing's shape (§II-A voxelisation): grid codes of 16384
   points, ``np.unique`` with the inverse, ``np.bincount`` reductions, ``np.hypot``.
 
-Its time ``ref_ms`` (the median of many short repetitions, one after every benchmark case,
-see :class:`SpeedMeter`) is *the index* of a run: a machine that is 1.5x slower, or busier,
-has a 1.5x larger ``ref_ms`` and 1.5x larger estimator timings, and the timings divided by
-``ref_ms`` ("x ref") stay put. Compare two runs through the "x ref" figures, never the
+Its time ``ref_ms`` is *the index* of a run: a machine that is 1.5x slower, or busier, has
+a 1.5x larger ``ref_ms`` and 1.5x larger estimator timings, and the timings divided by
+``ref_ms`` ("x ref") stay put. ``ref_ms`` is the *mean* of many short repetitions (~6 ms on
+a quiet 2.45 GHz EPYC core), 5 before the cases, one after each case in the case's own
+process and 5 after (see :class:`SpeedMeter`): interleaved, they see the load the cases saw.
+The mean, not the median: on a shared machine a short repetition is preempted now and then
+(a long case almost always, in proportion to its length), and only the mean carries that
+cost in proportion, as it lands in the cases' times. Compare two runs through the "x ref" figures, never the
 milliseconds; docs/benchmark.md says how.
 
 The workload is frozen: :data:`REF_VERSION` names it, and any change to it (sizes, formula,
@@ -33,7 +37,7 @@ import time
 from numba import njit
 import numpy as np
 
-__all__ = ['REF_VERSION', 'reference_once', 'SpeedMeter', 'in_ref', 'relative_summary',
+__all__ = ['REF_VERSION', 'reference_once', 'after_case', 'SpeedMeter', 'in_ref', 'relative_summary',
            'format_index', 'profile_summary', 'format_profile']
 
 REF_VERSION = 1
@@ -136,6 +140,9 @@ class _Reference:
 
 
 _REF: _Reference | None = None
+#: after-case repetitions cost at most this share of the cases' time (per process)
+REF_SHARE = 0.25
+_SPENT = {'reference_ms': 0.0, 'cases_ms': 0.0}
 
 
 def reference_once() -> tuple[float, tuple]:
@@ -145,6 +152,18 @@ def reference_once() -> tuple[float, tuple]:
         _REF = _Reference()
         _REF.once()            # JIT compile / cache load, first-touch of the data
     return _REF.once()
+
+
+def after_case(case_ms: float) -> float | None:
+    """A repetition after a benchmark case that took ``case_ms``, in the case's process, unless
+    the repetitions so far cost more than :data:`REF_SHARE` of the cases' time (then None).
+    Interleaved with the cases, the repetitions see the load the cases saw."""
+    _SPENT['cases_ms'] += max(float(case_ms), 0.0)
+    if _SPENT['reference_ms'] > REF_SHARE * _SPENT['cases_ms']:
+        return None
+    ms = reference_once()[0]
+    _SPENT['reference_ms'] += ms
+    return ms
 
 
 class SpeedMeter:
@@ -168,14 +187,15 @@ class SpeedMeter:
         self.samples.append(float(ms))
 
     def result(self) -> dict:
-        """The run's index: ``ref_ms`` (median of all repetitions) and its spread."""
+        """The run's index: ``ref_ms`` (mean of all repetitions, see the module docstring)
+        and its spread (median, p10, p90, min)."""
         s = sorted(self.samples)
         if not s:
             return {'version': REF_VERSION, 'ref_ms': None, 'repetitions': 0}
         q = statistics.quantiles(s, n=10) if len(s) >= 2 else [s[0]] * 9
-        return {'version': REF_VERSION, 'ref_ms': float(statistics.median(s)),
-                'p10_ms': float(q[0]), 'p90_ms': float(q[-1]), 'min_ms': float(s[0]),
-                'repetitions': len(s)}
+        return {'version': REF_VERSION, 'ref_ms': float(statistics.fmean(s)),
+                'median_ms': float(statistics.median(s)), 'p10_ms': float(q[0]),
+                'p90_ms': float(q[-1]), 'min_ms': float(s[0]), 'repetitions': len(s)}
 
 
 def in_ref(ms, ref_ms):
