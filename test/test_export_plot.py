@@ -73,5 +73,9 @@ def test_png_and_markers_share_one_palette():
     for kind, rgb in drawn.items():
         assert rgb == pytest.approx(KIND_RGBA[kind][:3])
         assert COLORS[kind][:3] == pytest.approx(rgb)     # the marker of the same lane
+    fig = estimate_figure(topo, [])
+    (center,) = [ln for ln in fig.axes[0].get_lines() if ln.get_gid() == 'center']
+    assert to_rgb(center.get_color()) == pytest.approx(COLORS['center'][:3])
+    plt.close(fig)
     assert KIND_RGBA['entering'][1] > KIND_RGBA['entering'][2]   # entering green,
     assert KIND_RGBA['leaving'][2] > KIND_RGBA['leaving'][1]     # leaving blue

@@ -86,7 +86,7 @@ def _draw_topology(ax, intersection, arm_length):
     if intersection is None:
         return
     c = np.asarray(intersection.center, float)
-    ax.plot(*c, '+', color=PNG_NEUTRAL['arm'], ms=12, mew=2, zorder=5)
+    ax.plot(*c, '+', color=RGBA['center'][:3], ms=12, mew=2, zorder=5, gid='center')
     for i, a in enumerate(intersection.arms):
         e = c + arm_length * np.array([math.cos(a.angle), math.sin(a.angle)])
         ax.plot([c[0], e[0]], [c[1], e[1]], color=PNG_NEUTRAL['arm'], ls='-.', lw=0.8, zorder=2)
