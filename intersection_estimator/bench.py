@@ -26,7 +26,6 @@ import sys
 import time
 import traceback
 
-from . import speed_index as SI
 from .estimate_io import dumps, estimate_to_dict, gt_to_dict
 from .evaluate import aggregate, evaluate
 from .sim import MODES, SimConfig, simulate_scenario
@@ -135,6 +134,7 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
         except Exception as e:  # noqa: BLE001 - one bad case must not stop a benchmark
             est, timing = {'error': f'{type(e).__name__}: {e}'}, {}
             tb = traceback.format_exc(limit=3)
+        from . import speed_index as SI   # lazy: importing numba costs seconds (--help must not)
         ref = SI.after_case(timing.get('wall', 0.0))   # the speed index, in this process, now
         if ref is not None:
             timing['reference'] = ref
@@ -181,6 +181,7 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     bar = _progress(opts.n)
     cases = []
     t0 = time.perf_counter()
+    from . import speed_index as SI
     meter = None if opts.oracle else SI.SpeedMeter()
     meter and meter.warm(5)
     if opts.jobs > 1:
@@ -215,6 +216,7 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
 def _speed_index(meter, cases, summary) -> dict | None:
     """The run's speed index (issue 18): reference repetitions before the cases, one after each
     case (in its worker) and after the cases; every ``*_ms_*`` figure also as ``*_ref_*``."""
+    from . import speed_index as SI
     if meter is None:
         return None
     for c in cases:
@@ -277,7 +279,8 @@ def format_table(result: dict) -> str:
              '-' * (w0 + w1 + 30)]
     lines += [f'{a:{w0}s}  {b:>{w1}s}  {c}' for a, b, c in rows]
     if 'speed_index' in cfg:
-        lines.append(SI.format_index(cfg['speed_index']))
+        from .speed_index import format_index
+        lines.append(format_index(cfg['speed_index']))
     if cfg['jobs'] > 1:
         lines.append(f"note: {cfg['timing_note']}")
     return '\n'.join(lines)
@@ -316,7 +319,8 @@ def _cmd(args) -> int:
     result = run_bench(opts)
     print(format_table(result))
     if 'profile' in result:
-        print(SI.format_profile(result['profile'], opts.mode))
+        from .speed_index import format_profile
+        print(format_profile(result['profile'], opts.mode))
     if args.json:
         Path(args.json).write_text(dumps(result))
         print(f'wrote {args.json}')
