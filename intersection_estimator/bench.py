@@ -56,6 +56,7 @@ class BenchOptions:
     jobs: int = 1
     oracle: bool = False
     warmup: bool = True     # one small untimed estimator run per process first
+    profile: bool = False   # per case: where the time went (EstimateResult.phases_ms)
 
 
 def package_version() -> str:
@@ -80,7 +81,7 @@ def _topology_part(doc: dict) -> dict:
 
 
 def _run_estimator(estimator, sc, opts: BenchOptions):
-    """-> (estimate.json dict, timing_ms) of the estimator on the scenario's detections."""
+    """-> (estimate.json dict, timing_ms, profile) of the estimator on the scenario's detections."""
     dets = sc.detections(opts.mode)
     t0 = time.perf_counter()
     res = estimator(dets, mode=opts.mode, topology_samples=opts.samples,
@@ -93,7 +94,9 @@ def _run_estimator(estimator, sc, opts: BenchOptions):
         raise ValueError('estimator returned no intersection')
     stats = {'topology_samples': opts.samples, 'lane_samples': opts.lane_samples,
              'elapsed_s': timing['total'] / 1e3}
-    return estimate_to_dict(res.intersection, list(res.lanelets or []), stats, arrays=True), timing
+    profile = {'phases_ms': dict(getattr(res, 'phases_ms', None) or {}),
+               'counters': dict(getattr(res, 'counters', None) or {})}
+    return estimate_to_dict(res.intersection, list(res.lanelets or []), stats, arrays=True), timing, profile
 
 
 _WARM: set = set()
@@ -120,17 +123,21 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
     sc = simulate_scenario(seed, SimConfig())
     gt = gt_to_dict(sc, arrays=True)
     sim_ms = 1e3 * (time.perf_counter() - t0)
-    tb = None
+    tb = profile = None
     if opts.oracle:
         est, timing = gt, {}
     else:
         try:
             estimator = estimator or _load_estimator()
             _warm_up(estimator, opts)
-            est, timing = _run_estimator(estimator, sc, opts)
+            est, timing, profile = _run_estimator(estimator, sc, opts)
         except Exception as e:  # noqa: BLE001 - one bad case must not stop a benchmark
             est, timing = {'error': f'{type(e).__name__}: {e}'}, {}
             tb = traceback.format_exc(limit=3)
+        from . import speed_index as SI   # lazy: importing numba costs seconds (--help must not)
+        ref = SI.after_case(timing.get('wall', 0.0))   # the speed index, in this process, now
+        if ref is not None:
+            timing['reference'] = ref
     if opts.lane_samples == 0:   # lane step skipped: score topology only
         gt = {**gt, 'lanes': []}
         if 'lanes' in est:
@@ -140,9 +147,12 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
         metrics['reason'] = f'estimator raised {est["error"]}'
         metrics['traceback'] = tb
     timing['simulate'] = sim_ms
-    return {'seed': seed, 'true': _topology_part(gt),
+    case = {'seed': seed, 'true': _topology_part(gt),
             'estimate': _topology_part(est) if 'center' in est else None,
             'metrics': metrics, 'timing_ms': timing}
+    if opts.profile and profile is not None:
+        case['profile'] = profile
+    return case
 
 
 def _worker(args):
@@ -171,6 +181,9 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     bar = _progress(opts.n)
     cases = []
     t0 = time.perf_counter()
+    from . import speed_index as SI
+    meter = None if opts.oracle else SI.SpeedMeter()
+    meter and meter.warm(5)
     if opts.jobs > 1:
         with mp.get_context('spawn').Pool(opts.jobs) as pool:
             for case in pool.imap(_worker, ((i, opts) for i in range(opts.n)), chunksize=2):
@@ -182,6 +195,7 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
             bar and bar.update()
     bar and bar.close()
     summary = aggregate([c['metrics'] for c in cases], [c['timing_ms'] for c in cases])
+    index = _speed_index(meter, cases, summary)
     config = {**asdict(opts), 'estimator': 'oracle (ground truth)' if opts.oracle else
               getattr(estimator, '__module__', 'intersection_estimator.pipeline') + '.estimate',
               'sim_config': SimConfig().to_dict(), 'package_version': package_version(),
@@ -191,8 +205,27 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
                               'process); ' + (
                                   f'{opts.jobs} workers shared {os.cpu_count()} cores, so '
                                   'timings are inflated: use --jobs 1 for headline timings'
-                                  if opts.jobs > 1 else 'single process'))}
-    return {'config': config, 'summary': summary, 'cases': cases}
+                                  if opts.jobs > 1 else 'single process')),
+              'speed_index': index}
+    out = {'config': config, 'summary': summary, 'cases': cases}
+    if opts.profile:
+        out['profile'] = SI.profile_summary(cases, index and index['ref_ms'])
+    return out
+
+
+def _speed_index(meter, cases, summary) -> dict | None:
+    """The run's speed index (issue 18): reference repetitions before the cases, one after each
+    case (in its worker) and after the cases; every ``*_ms_*`` figure also as ``*_ref_*``."""
+    from . import speed_index as SI
+    if meter is None:
+        return None
+    for c in cases:
+        if c['timing_ms'].get('reference') is not None:
+            meter.add(c['timing_ms']['reference'])
+    meter.warm(5)
+    index = meter.result()
+    summary.update(SI.relative_summary(summary, index['ref_ms']))
+    return index
 
 
 # ---------------------------------------------------------------- table
@@ -231,15 +264,11 @@ def format_table(result: dict) -> str:
                     for k in ('entering', 'leaving', 'connector')), ''),
         ('lane precision', _fmt(s['lane_precision'], 'pct'), ''),
         ('connectivity recall', _fmt(s['connectivity_recall'], 'pct'), ''),
-        (f"topology time median / p95 [ms] @{cfg['samples']}",
-         f"{_fmt(s['topology_ms_median'], 'ms')} / {_fmt(s['topology_ms_p95'], 'ms')}",
+        (f"topology time median / p95 [ms] @{cfg['samples']}", _times(s, 'topology'),
          paper('topology_ms_median', 'ms') + ' (mean @5000)'),
-        (f"lane course time median / p95 [ms] @{cfg['lane_samples']}",
-         f"{_fmt(s['lanes_ms_median'], 'ms')} / {_fmt(s['lanes_ms_p95'], 'ms')}",
+        (f"lane course time median / p95 [ms] @{cfg['lane_samples']}", _times(s, 'lanes'),
          paper('lanes_ms_median', 'ms') + ' (mean @20000)'),
-        ('total time median / p95 [ms]',
-         f"{_fmt(s['total_ms_median'], 'ms')} / {_fmt(s['total_ms_p95'], 'ms')}",
-         paper('total_ms_median', 'ms') + ' (mean)'),
+        ('total time median / p95 [ms]', _times(s, 'total'), paper('total_ms_median', 'ms') + ' (mean)'),
         ('failed cases', f"{s['n_failed']} / {s['n']}", ''),
     ]
     head = (f"bench  mode={cfg['mode']}  n={cfg['n']}  seed={cfg['seed']}  jobs={cfg['jobs']}  "
@@ -249,9 +278,21 @@ def format_table(result: dict) -> str:
     lines = [head, f"{'metric':{w0}s}  {'ours':>{w1}s}  paper ({pm}, i7-8750H C++)",
              '-' * (w0 + w1 + 30)]
     lines += [f'{a:{w0}s}  {b:>{w1}s}  {c}' for a, b, c in rows]
+    if 'speed_index' in cfg:
+        from .speed_index import format_index
+        lines.append(format_index(cfg['speed_index']))
     if cfg['jobs'] > 1:
         lines.append(f"note: {cfg['timing_note']}")
     return '\n'.join(lines)
+
+
+def _times(s: dict, step: str) -> str:
+    """'median / p95' in ms, and in x ref when the run measured its speed index."""
+    ms = f"{_fmt(s[f'{step}_ms_median'], 'ms')} / {_fmt(s[f'{step}_ms_p95'], 'ms')}"
+    med, p95 = s.get(f'{step}_ref_median'), s.get(f'{step}_ref_p95')
+    if med is None or p95 is None:
+        return ms
+    return f'{ms} (= {med:.2f} / {p95:.2f} x ref)'
 
 
 def is_perfect(summary: dict) -> bool:
@@ -267,7 +308,8 @@ def is_perfect(summary: dict) -> bool:
 def _cmd(args) -> int:
     opts = BenchOptions(n=args.n, mode=args.mode, samples=args.samples,
                         lane_samples=args.lane_samples, seed=args.seed, jobs=args.jobs,
-                        oracle=args.oracle, warmup=not args.no_warmup)
+                        oracle=args.oracle, warmup=not args.no_warmup,
+                        profile=getattr(args, 'profile', False))
     if not opts.oracle:
         try:
             _load_estimator()
@@ -276,6 +318,9 @@ def _cmd(args) -> int:
             return 2
     result = run_bench(opts)
     print(format_table(result))
+    if 'profile' in result:
+        from .speed_index import format_profile
+        print(format_profile(result['profile'], opts.mode))
     if args.json:
         Path(args.json).write_text(dumps(result))
         print(f'wrote {args.json}')
@@ -299,6 +344,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--json', metavar='OUT', help='write config, summary and all cases')
     p.add_argument('--oracle', action='store_true',
                    help='score the ground truth itself (sanity: must be perfect)')
+    p.add_argument('--profile', action='store_true',
+                   help='per case and phase: where the time goes (table, and "profile" in --json)')
     p.add_argument('--no-warmup', action='store_true',
                    help='time the first case cold (imports / JIT compilation included)')
     p.set_defaults(func=_cmd)

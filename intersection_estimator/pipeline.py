@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from .convergence import ConvergenceConfig, ConvergenceTracker
 from .lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
 from .model import Intersection, Lanelet
 from .observations import Detections
@@ -24,7 +25,14 @@ __all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'm
 
 @dataclass
 class EstimateResult:
-    """A snapshot of the estimate: topology, lanelets and what it cost."""
+    """A snapshot of the estimate: topology, lanelets and what it cost.
+
+    ``state`` is what a user gates on: in :class:`OnlineEstimator` the hysteresis state of
+    :mod:`.convergence` (NO_DATA / CONVERGING / CONVERGED, meanings documented there);
+    ``sampler_state`` is the topology chain's own plateau test (``TopologyEstimator.state``),
+    which flickers while data arrives. :func:`estimate` (one batch, no time series) reports
+    the sampler's state as both.
+    """
 
     intersection: Intersection | None
     lanelets: list[Lanelet]
@@ -35,6 +43,13 @@ class EstimateResult:
     state: str = 'NO_DATA'
     observations: int = 0
     lanes_updated: bool = True        # lanelets differ from the previous tick's
+    sampler_state: str | None = None  # TopologyEstimator.state of this tick (None: = state)
+    phases_ms: dict = field(default_factory=dict)   # estimate(): where the time went (bench --profile)
+    counters: dict = field(default_factory=dict)    # estimate(): how often a phase ran
+
+    def __post_init__(self):
+        if self.sampler_state is None:
+            self.sampler_state = self.state
 
     def stats(self) -> dict:
         return {'topology_samples': int(self.topology_samples), 'lane_samples': int(self.lane_samples),
@@ -72,25 +87,49 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
     topo = TopologyEstimator(topology_config or TopologyConfig(), rng_topo)
     t0 = time.perf_counter()
     topo.set_observations(dets)
+    ta = time.perf_counter()
     topo.run(n_samples=topology_samples)
     t1 = time.perf_counter()
     best = topo.best
-    lanelets, n_lane = _lanes(best, dets, mode, lane_samples, lane_config, rng_lanes)
+    tb = time.perf_counter()
+    lanelets, n_lane, lane_s = _lanes(best, dets, mode, lane_samples, lane_config, rng_lanes)
     t2 = time.perf_counter()
     timing = {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3}
+    state = topo.state
     return EstimateResult(best, lanelets, timing, topo.samples_drawn, n_lane,
-                          topo.best_log_posterior, topo.state, len(dets))
+                          topo.best_log_posterior, state, len(dets), sampler_state=state,
+                          phases_ms=_phases(topo, (t0, ta, t1, tb, t2), lane_s),
+                          counters={'topology_preprocess': int(topo.preprocess_count),
+                                    'topology_chains': int(topo.n_chains)})
+
+
+def _phases(topo, marks, lane_s: dict) -> dict:
+    """Where :func:`estimate`'s time went [ms]: the phases timed around the estimators' calls,
+    the lane course's own timers, and any phase timers the topology estimator keeps
+    (``TopologyEstimator.timings`` [s], when it has them). ``topology_setup``: the first
+    ``set_observations`` (preprocessing and data-driven initialisation, §II-A); ``topology_run``:
+    chain samples, refits, descent and re-preprocessing together (§II-B/C; the topology
+    estimator has no timers inside); ``topology_report``: the reported MAP estimate."""
+    t0, ta, t1, tb, t2 = marks
+    out = {'topology_setup': (ta - t0) * 1e3, 'topology_run': (t1 - ta) * 1e3,
+           'topology_report': (tb - t1) * 1e3}
+    out.update({f'topology_{k}': 1e3 * v for k, v in dict(getattr(topo, 'timings', {}) or {}).items()})
+    lanes = {f'lanes_{k}': 1e3 * v for k, v in lane_s.items()}
+    out.update(lanes)
+    out['lanes_other'] = max((t2 - tb) * 1e3 - sum(lanes.values()), 0.0)
+    return out
 
 
 def _lanes(best, dets, mode, lane_samples, lane_config, rng):
+    """(lanelets, lane samples drawn, the lane estimator's phase timers [s])."""
     if best is None:
-        return [], 0
+        return [], 0, {}
     if mode != 'tracked' or lane_samples <= 0:
-        return lanelets_from_topology(best), 0
+        return lanelets_from_topology(best), 0, {}
     lanes = LaneCourseEstimator(lane_config or LaneConfig(), rng)
     lanes.initialise(best, dets)
     lanes.run(n_samples=lane_samples)
-    return lanes.lanelets, lanes.samples_drawn
+    return lanes.lanelets, lanes.samples_drawn, dict(lanes.timings)
 
 
 @dataclass(frozen=True)
@@ -109,6 +148,7 @@ class PipelineConfig:
     restart_growth: float = 1.5       # race a fresh topology chain when the window grew by this factor
     topology: TopologyConfig = field(default_factory=TopologyConfig)
     lanes: LaneConfig = field(default_factory=LaneConfig)
+    convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)  # reported state
 
     def validate(self) -> None:
         """Raise ValueError naming the first parameter outside its allowed range."""
@@ -126,6 +166,7 @@ class PipelineConfig:
                 raise ValueError(f'{name}={getattr(self, name)!r} out of range: must be {allowed}')
         self.topology.validate()
         self.lanes.validate()
+        self.convergence.validate()
 
 
 class OnlineEstimator:
@@ -159,6 +200,7 @@ class OnlineEstimator:
         self._dirty = False
         self._approached = False
         self._restart_n, self._races = 0, 0
+        self._convergence = ConvergenceTracker(self.config.convergence)
         self.result = EstimateResult(None, [])
 
     @property
@@ -194,9 +236,10 @@ class OnlineEstimator:
 
     def passed(self, ego_xy, ego_yaw: float) -> bool:
         """True when the ego, seen approaching a converged estimate, is now ``reset_distance``
-        past its center (an early, wrong center behind the ego must not throw data away)."""
+        past its center (an early, wrong center behind the ego must not throw data away).
+        Gated on the sampler's own state, as before the reported state had hysteresis."""
         best = self.result.intersection
-        if best is None or self.result.state != 'CONVERGED':
+        if best is None or self.result.sampler_state != 'CONVERGED':
             return False
         d = np.asarray(ego_xy, float) - best.center
         along = float(d @ np.array([np.cos(ego_yaw), np.sin(ego_yaw)]))
@@ -239,10 +282,12 @@ class OnlineEstimator:
         lanelets = self._tick_lanes(best, dets, now, deadline - lanes_reserve_s if wall_budget else None,
                                     total)
         t2 = time.perf_counter()
+        sampler_state = self._topo.state
         self.result = EstimateResult(
             best, lanelets, {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3},
             self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_key else 0,
-            self._topo.best_log_posterior, self._topo.state, len(dets), self._lanes_updated)
+            self._topo.best_log_posterior, self._convergence.update(now, sampler_state, best),
+            len(dets), self._lanes_updated, sampler_state)
         return self.result
 
     def _restart(self, dets: Detections, topo_end: float | None, total: float) -> None:

@@ -9,7 +9,9 @@ every center line, pointing in driving direction), ``lanelet_id`` (text).
 Marker ids are stable: per lanelet a hash of its id (the same lanelet keeps its id across
 calls, whatever the order), per arm its index. Keys that were published before and are
 gone now get a DELETE, so RViz / Foxglove never show stale lanes. All markers are in the
-header's frame (the fixed frame); publish with TRANSIENT_LOCAL durability.
+header's frame (the fixed frame); publish with TRANSIENT_LOCAL durability. Colours come
+from :mod:`intersection_estimator.palette` (entering green, leaving blue, connector orange),
+the same as in the PNG.
 """
 
 from __future__ import annotations
@@ -19,22 +21,14 @@ import zlib
 
 import numpy as np
 
+from intersection_estimator.palette import RGBA
+
 __all__ = ['NAMESPACES', 'COLORS', 'markers_msg', 'lanelet_marker_id']
 
 NAMESPACES = ('center', 'arm_axes', 'left_lane_bound', 'right_lane_bound', 'center_lane_line',
               'center_line_arrows', 'connectors', 'lanelet_id')
-#: RGBA per kind of drawing.
-COLORS = {
-    'center': (1.0, 0.2, 0.2, 1.0),
-    'arm': (0.7, 0.7, 0.7, 0.8),
-    'entering': (0.2, 0.8, 0.3, 0.9),
-    'leaving': (0.2, 0.5, 1.0, 0.9),
-    'connector': (1.0, 0.6, 0.1, 0.9),
-    'bound': (1.0, 1.0, 1.0, 0.9),
-    'virtual_bound': (1.0, 1.0, 1.0, 0.3),
-    'arrow': (1.0, 1.0, 1.0, 0.7),
-    'text': (1.0, 1.0, 1.0, 1.0),
-}
+#: RGBA per kind of drawing: the package's one palette (the PNG uses the same colours).
+COLORS = RGBA
 ARROW, SPHERE, LINE_STRIP, TEXT_VIEW_FACING, TRIANGLE_LIST = 0, 2, 4, 9, 11
 ADD, DELETE = 0, 2
 _ARROW_SPACING = 8.0   # [m] between center line arrows

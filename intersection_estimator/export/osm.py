@@ -7,33 +7,71 @@
   construction: consecutive lanelets' end points, neighbours' border points) become
   one node, so routing sees consecutive lanelets as connected. A border that is the
   same node sequence as another lanelet's border (or its reverse) is the same way.
+* Neighbouring lanes of one direction (same arm and kind) share their border *way*:
+  when one lane's right border and the other's left border run point by point within
+  :data:`MERGE_TOL` (an estimate may leave them a few cm apart), their points are merged
+  into one node each (at the mean position), so the two lanelets reference one
+  linestring and lanelet2's RoutingGraph offers a lane change between them.
 * Line types: borders of connectors (inside the intersection) are ``virtual``; a
-  border shared by two lanes of the same direction is ``line_thin``/``dashed``; other
-  borders ``line_thin``/``solid``.
+  border shared by two lanes of the same direction is ``line_thin``/``dashed`` (lane
+  change allowed); other borders -- the median, the road edge -- ``line_thin``/``solid``.
 * Coordinates are metric in the local fixed frame; they are written with
-  ``lanelet2.projection.LocalCartesianProjector(Origin(*origin_latlon))`` -- load
-  with the same projector and origin to get the metric coordinates back. Points also
-  carry ``local_x``/``local_y`` tags (Autoware convention). Ids are positive and
-  unique (points, ways, relations from one counter starting at 1).
+  ``lanelet2.projection.LocalCartesianProjector(Origin(lat, lon))`` around the geo origin
+  ``origin_latlon`` (default :data:`DEFAULT_ORIGIN`), and the origin is written into the
+  file as ``<geoReference lat= lon= alt= projector="LocalCartesian"/>`` (an element OSM
+  readers and lanelet2 skip): :func:`load_osm` / :func:`read_origin` take it from there,
+  so the metric coordinates come back without knowing the origin. Points also carry
+  ``local_x``/``local_y`` tags (Autoware convention). Ids are positive and unique
+  (points, ways, relations from one counter starting at 1).
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
+import re
+import xml.etree.ElementTree as ET
 
 import numpy as np
 
-__all__ = ['write_osm', 'projector', 'turn_direction', 'load_osm']
+__all__ = ['write_osm', 'projector', 'turn_direction', 'load_osm', 'read_origin', 'check_origin',
+           'parse_origin', 'DEFAULT_ORIGIN', 'MERGE_TOL']
 
 _QUANT = 1e-4  # coordinates equal to this resolution are the same node [m]
 STRAIGHT_DEG = 30.0
+#: geo origin (lat, lon) [deg] when none is given (Karlsruhe, the paper's test area)
+DEFAULT_ORIGIN = (49.0, 8.4)
+#: neighbouring same-direction borders this close point by point are one linestring [m]
+MERGE_TOL = 0.5
 
 
-def projector(origin_latlon=(49.0, 8.4)):
+def check_origin(origin_latlon, name: str = 'origin_latlon') -> tuple[float, float]:
+    """(lat, lon) as floats; ValueError naming ``name`` unless finite, |lat| <= 90, |lon| <= 180."""
+    try:
+        lat, lon = (float(v) for v in origin_latlon)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be two numbers (latitude, longitude) in degrees, '
+                         f'got {origin_latlon!r}') from None
+    if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90.0 and abs(lon) <= 180.0):
+        raise ValueError(f'{name}=({lat}, {lon}) out of range: latitude in [-90, 90], '
+                         f'longitude in [-180, 180] degrees')
+    return lat, lon
+
+
+def parse_origin(text: str, name: str = '--origin') -> tuple[float, float]:
+    """'LAT,LON' (or 'LAT LON') -> (lat, lon), for a command-line option named ``name``."""
+    parts = [p for p in re.split(r'[,\s]+', str(text).strip()) if p]
+    if len(parts) != 2:
+        raise ValueError(f'{name} must be LAT,LON in degrees (e.g. 49.0,8.4), got {text!r}')
+    return check_origin(parts, name)
+
+
+def projector(origin_latlon=DEFAULT_ORIGIN):
     """The projector the map is written with (local Cartesian around the origin)."""
     from lanelet2.io import Origin
     from lanelet2.projection import LocalCartesianProjector
-    return LocalCartesianProjector(Origin(float(origin_latlon[0]), float(origin_latlon[1])))
+    lat, lon = check_origin(origin_latlon)
+    return LocalCartesianProjector(Origin(lat, lon))
 
 
 def turn_direction(center: np.ndarray) -> str:
@@ -52,46 +90,107 @@ def _key(p) -> tuple:
     return (int(round(float(p[0]) / _QUANT)), int(round(float(p[1]) / _QUANT)))
 
 
-def write_osm(path, lanelets, origin_latlon=(49.0, 8.4)):
-    """Write ``lanelets`` (list of :class:`model.Lanelet`) as a Lanelet2 OSM map; returns ``path``."""
-    import lanelet2
+class _Nodes:
+    """Point keys -> one node per group: union-find over keys, position = group mean."""
+
+    def __init__(self, lanelets):
+        self.parent: dict = {}
+        self.xy: dict = {}
+        for l in lanelets:
+            for b in (l.left, l.right):
+                for p in np.asarray(b, float).reshape(-1, 2):
+                    k = _key(p)
+                    self.parent.setdefault(k, k)
+                    self.xy[k] = p
+
+    def find(self, k):
+        while self.parent[k] != k:
+            self.parent[k] = self.parent[self.parent[k]]
+            k = self.parent[k]
+        return k
+
+    def union(self, a, b) -> None:
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self.parent[max(ra, rb)] = min(ra, rb)
+
+    def positions(self) -> dict:
+        """group root -> mean position of its keys."""
+        acc: dict = {}
+        for k, p in self.xy.items():
+            acc.setdefault(self.find(k), []).append(p)
+        return {r: np.mean(ps, axis=0) for r, ps in acc.items()}
+
+
+def _merge_neighbours(lanelets, nodes: _Nodes) -> int:
+    """Union the right border of each lane with the left border of its same-direction
+    neighbour when they run within :data:`MERGE_TOL` point by point; returns the pairs."""
+    groups: dict = {}
+    for l in lanelets:
+        if l.kind != 'connector':
+            groups.setdefault((l.arm, l.kind), []).append(l)
+    pairs = 0
+    for lanes in groups.values():
+        for a in lanes:
+            for b in lanes:
+                A, B = np.asarray(a.right, float), np.asarray(b.left, float)
+                if a is b or len(A) != len(B) or not len(A):
+                    continue
+                if float(np.max(np.hypot(*(A - B).T))) <= MERGE_TOL:
+                    for p, q in zip(A, B):
+                        nodes.union(_key(p), _key(q))
+                    pairs += 1
+    return pairs
+
+
+def _line_attrs(users) -> dict:
+    if any(u.kind == 'connector' for u in users):
+        return {'type': 'virtual'}
+    if len(users) > 1 and len({u.kind for u in users}) == 1:
+        return {'type': 'line_thin', 'subtype': 'dashed'}
+    return {'type': 'line_thin', 'subtype': 'solid'}
+
+
+def _lanelet_map(lanelets):
+    """The lanelet2 LaneletMap of ``lanelets`` (shared nodes and ways, see module docstring)."""
     from lanelet2.core import AttributeMap, LaneletMap, LineString3d, Point3d
     from lanelet2.core import Lanelet as LL
 
     ids = iter(range(1, 1 << 62))
-    nodes: dict = {}
-    ways: dict = {}
+    nodes = _Nodes(lanelets)
+    _merge_neighbours(lanelets, nodes)
+    pos = nodes.positions()
+    points: dict = {}
 
-    def node(p):
-        k = _key(p)
-        if k not in nodes:
-            x, y = float(p[0]), float(p[1])
-            nodes[k] = Point3d(next(ids), x, y, 0.0,
-                               AttributeMap({'local_x': f'{x:.4f}', 'local_y': f'{y:.4f}'}))
-        return nodes[k]
+    def seq_of(b):
+        out = []
+        for p in np.asarray(b, float).reshape(-1, 2):
+            r = nodes.find(_key(p))
+            if not out or out[-1] != r:          # a merge never folds a border onto itself
+                out.append(r)
+        return tuple(out)
 
-    # who uses which border (by node sequence): decides sharing and line type
-    users: dict = {}
+    def point(r):
+        if r not in points:
+            x, y = float(pos[r][0]), float(pos[r][1])
+            points[r] = Point3d(next(ids), x, y, 0.0,
+                                AttributeMap({'local_x': f'{x:.4f}', 'local_y': f'{y:.4f}'}))
+        return points[r]
+
+    users: dict = {}     # who uses which border (by node sequence): decides sharing and line type
     for l in lanelets:
         for b in (l.left, l.right):
-            seq = tuple(_key(p) for p in b)
+            seq = seq_of(b)
             users.setdefault(min(seq, seq[::-1]), []).append(l)
+    ways: dict = {}
 
-    def way(b, owner):
-        seq = tuple(_key(p) for p in b)
+    def way(b):
+        seq = seq_of(b)
         canon = min(seq, seq[::-1])
         if canon not in ways:
-            us = users[canon]
-            if any(u.kind == 'connector' for u in us):
-                attrs = {'type': 'virtual'}
-            elif len(us) > 1 and len({u.kind for u in us}) == 1:
-                attrs = {'type': 'line_thin', 'subtype': 'dashed'}
-            else:
-                attrs = {'type': 'line_thin', 'subtype': 'solid'}
-            pts = [node(p) for p in (b if seq == canon else b[::-1])]
-            ways[canon] = LineString3d(next(ids), pts, AttributeMap(attrs))
-        ls = ways[canon]
-        return ls if seq == canon else ls.invert()
+            ways[canon] = LineString3d(next(ids), [point(r) for r in canon],
+                                       AttributeMap(_line_attrs(users[canon])))
+        return ways[canon] if seq == canon else ways[canon].invert()
 
     lmap = LaneletMap()
     for l in lanelets:
@@ -99,12 +198,46 @@ def write_osm(path, lanelets, origin_latlon=(49.0, 8.4)):
                  'ie:id': str(l.id), 'ie:kind': l.kind}
         if l.kind == 'connector':
             attrs['turn_direction'] = turn_direction(l.center)
-        lmap.add(LL(next(ids), way(l.left, l), way(l.right, l), AttributeMap(attrs)))
-    lanelet2.io.write(str(path), lmap, projector(origin_latlon))
+        lmap.add(LL(next(ids), way(l.left), way(l.right), AttributeMap(attrs)))
+    return lmap
+
+
+def write_osm(path, lanelets, origin_latlon=DEFAULT_ORIGIN):
+    """Write ``lanelets`` (list of :class:`model.Lanelet`) as a Lanelet2 OSM map around the geo
+    origin ``origin_latlon`` = (lat, lon) [deg], written into the file; returns ``path``."""
+    import lanelet2
+    lat, lon = check_origin(origin_latlon)
+    lanelet2.io.write(str(path), _lanelet_map(lanelets), projector((lat, lon)))
+    _write_geo_reference(Path(path), lat, lon)
     return path
 
 
-def load_osm(path, origin_latlon=(49.0, 8.4)):
-    """Load a map written by :func:`write_osm` back into metric coordinates."""
+def _write_geo_reference(path: Path, lat: float, lon: float) -> None:
+    """Insert ``<geoReference .../>`` as the first child of ``<osm>`` (text edit: the rest of
+    lanelet2's output stays byte for byte)."""
+    text = path.read_text()
+    m = re.search(r'<osm\b[^>]*>', text)
+    if m is None:
+        raise ValueError(f'{path}: lanelet2 wrote no <osm> element')
+    ref = (f'\n  <geoReference lat="{lat!r}" lon="{lon!r}" alt="0.0" projector="LocalCartesian" '
+           f'generator="intersection_estimator" />')
+    path.write_text(text[:m.end()] + ref + text[m.end():])
+
+
+def read_origin(path):
+    """(lat, lon) of the ``<geoReference>`` a map written by :func:`write_osm` carries, or
+    None when the file has none (a map from elsewhere, or from before the origin was written)."""
+    for _, el in ET.iterparse(str(path), events=('start',)):
+        if el.tag == 'geoReference':
+            return check_origin((el.get('lat'), el.get('lon')), f'{path}: geoReference')
+        if el.tag in ('node', 'way', 'relation'):
+            return None
+    return None
+
+
+def load_osm(path, origin_latlon=None):
+    """Load a map written by :func:`write_osm` back into metric coordinates, around
+    ``origin_latlon`` or else the origin written in the file (else :data:`DEFAULT_ORIGIN`)."""
     import lanelet2
-    return lanelet2.io.load(str(path), projector(origin_latlon))
+    origin = origin_latlon if origin_latlon is not None else (read_origin(path) or DEFAULT_ORIGIN)
+    return lanelet2.io.load(str(path), projector(origin))
