@@ -25,12 +25,10 @@ from . import params as P
 from .bagio import BAG_T0, SCENARIO_TOPICS, scenario_messages, scenario_mount, typestore
 from .ingest import Ingest, tick
 from .pipeline import OnlineEstimator
+from .roles import role_of_type
 from .sim import simulate_scenario
 
 __all__ = ['SoakReport', 'soak', 'rss_mb', 'register']
-
-_ROLE_OF_TOPIC = {SCENARIO_TOPICS['odometry']: 'odometry_topic', SCENARIO_TOPICS['radar']: 'radar_topics',
-                  SCENARIO_TOPICS['objects']: 'object_topics', SCENARIO_TOPICS['detections']: 'detection_topics'}
 
 
 def rss_mb() -> float:
@@ -112,9 +110,10 @@ def soak(minutes: float, *, seed: int = 0, sensors=('tracked', 'raw'), topology_
         last_t = BAG_T0 + sim_t
         for stream in (msgs, _drive_through(types, sc.ego, sc.gt.center, BAG_T0 + sim_t + sc.duration)):
             for t, topic, msg in stream:
-                if topic not in _ROLE_OF_TOPIC:
+                role = role_of_type(msg.__msgtype__)    # the one role table (.roles)
+                if role is None:                         # /tf_static: the mount is configured
                     continue
-                ingest.handle(_ROLE_OF_TOPIC[topic], msg, est)
+                ingest.handle(role, msg, est)
                 report.messages += 1
                 last_t = t
                 next_tick = t + period if next_tick is None else next_tick
