@@ -50,16 +50,20 @@ def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name:
             if not pubs:
                 raise BagError('no_usable_topic', 'no topic with an installed message type')
             pubs.pop('/clock', None)   # a recorded /clock is replaced by ours
-            end = time.monotonic() + wait_s
-            while time.monotonic() < end and not any(p.get_subscription_count() for p in pubs.values()):
-                rclpy.spin_once(node, timeout_sec=0.05)
             clock = _Clock(node, rate, clock_hz)
+            end = time.monotonic() + wait_s
+            while time.monotonic() < end and not any(p.get_subscription_count()
+                                                     for p in (clock.pub, *pubs.values())):
+                rclpy.spin_once(node, timeout_sec=0.05)
             n = 0
             for t_ns, topic, _, data in reader.raw_messages(topics=sorted(pubs)):
                 clock.until(t_ns)
                 pubs[topic].publish(bytes(data))
                 n += 1
-            print(f'live: published {n} messages on {len(pubs)} topics', file=sys.stderr)
+            from rclpy.duration import Duration
+            for p in (clock.pub, *pubs.values()):     # delivered before the node goes (reliable QoS)
+                p.wait_for_all_acked(Duration(seconds=2.0))
+            print(f'live: published {n} messages on {len(pubs)} topics and /clock', file=sys.stderr)
             return 2 if reader.truncated else 0
     finally:
         node.destroy_node()
