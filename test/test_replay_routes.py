@@ -9,12 +9,11 @@ intersection it finished; a gap of an hour costs about what no gap costs.
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest
 
-from intersection_estimator.bagio import BAG_T0, SCENARIO_TOPICS, BagWriter, scenario_messages
+from intersection_estimator.bagio import BAG_T0, SCENARIO_TOPICS, BagWriter, write_drive_bag
 from intersection_estimator.replay import EXIT_NO_INTERSECTION, EXIT_OK, replay
 from msg_adapters.odometry import odometry_msg
 from msg_adapters.pointcloud2 import radar_cloud_msg
@@ -96,35 +95,8 @@ def test_pointcloud2_without_doppler_found_by_type_is_named(tmp_path):
     assert not (tmp_path / 'out').exists()
 
 
-def drive_through(types, ego, center, t_start, speed=12.0, rate=10.0, wait_s=4.0):
-    """Odometry: the ego waits ``wait_s`` at its stop position (the estimate converges once
-    the traffic is in), then drives straight through the center and 60 m on."""
-    p0 = ego.xy[-1]
-    yaw = math.atan2(*(np.asarray(center) - p0)[::-1])
-    length = float(np.hypot(*(np.asarray(center) - p0))) + 60.0
-    n_wait = int(wait_s * rate)
-    for k in range(1, n_wait + int(length / speed * rate) + 1):
-        t = t_start + k / rate
-        s = max(0, k - n_wait) * speed / rate
-        yield t, ODOM, odometry_msg(types, t, p0[0] + s * math.cos(yaw), p0[1] + s * math.sin(yaw), yaw,
-                                    vx=speed)
-
-
 def drive_bag(path, seeds, gap_s=None):
-    """Scenarios one after the other: after each the ego drives through (``gap_s`` None),
-    or the next recording starts ``gap_s`` later (no drive through)."""
-    from intersection_estimator.sim import simulate_scenario
-    t0 = BAG_T0
-    with BagWriter(path) as w:
-        for seed in seeds:
-            sc = simulate_scenario(seed)
-            msgs = list(scenario_messages(sc, w.types, sensors=('tracked',), autoware=False, t0=t0))
-            if gap_s is None:
-                msgs += list(drive_through(w.types, sc.ego, sc.gt.center, t0 + sc.duration))
-            for t, topic, msg in msgs:
-                w.write(topic, msg, t)
-            t0 = msgs[-1][0] + (1.0 if gap_s is None else gap_s)
-    return path
+    return write_drive_bag(path, seeds, gap_s=gap_s)
 
 
 def test_a_drive_keeps_every_intersection(tmp_path):

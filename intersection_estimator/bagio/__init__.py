@@ -15,7 +15,7 @@ Split by concern as rosbags is:
 * :mod:`.writer` -- :class:`BagWriter`: MCAP output bags (zstd chunks), messages built with
   ``writer.types``.
 * :mod:`.scenario` -- :func:`write_scenario_bag` / :func:`scenario_messages`: a simulated
-  scenario on the node's input topics.
+  scenario on the node's input topics; :func:`write_drive_bag`: several, one after the other.
 
 Every failure is a :class:`BagError` whose ``reason`` is one of :data:`.errors.REASONS`
 and whose ``str()`` is one line.
@@ -27,11 +27,11 @@ from ..roles import ROLE_TYPES
 from .errors import BagError
 from .reader import BagMessage, BagSet, TopicInfo, detect_topics, open_bags
 from .scenario import (BAG_T0, SCENARIO_FRAMES, SCENARIO_RADAR_MOUNT, SCENARIO_TOPICS, ScenarioBagInfo,
-                       scenario_messages, scenario_mount, write_scenario_bag)
+                       drive_through, scenario_messages, scenario_mount, write_drive_bag, write_scenario_bag)
 from .typestore import schema_dirs, typestore
 from .writer import LATCHED, BagWriter
 
 __all__ = ['BagError', 'BagMessage', 'BagSet', 'BagWriter', 'TopicInfo', 'typestore', 'schema_dirs',
            'open_bags', 'detect_topics', 'write_scenario_bag', 'SCENARIO_TOPICS',
            'SCENARIO_FRAMES', 'SCENARIO_RADAR_MOUNT', 'BAG_T0', 'LATCHED', 'ROLE_TYPES',
-           'ScenarioBagInfo', 'scenario_messages', 'scenario_mount']
+           'ScenarioBagInfo', 'scenario_messages', 'scenario_mount', 'drive_through', 'write_drive_bag']

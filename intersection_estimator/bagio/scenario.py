@@ -12,7 +12,7 @@ import numpy as np
 from .writer import BagWriter
 
 __all__ = ['SCENARIO_TOPICS', 'SCENARIO_FRAMES', 'SCENARIO_RADAR_MOUNT', 'BAG_T0', 'ScenarioBagInfo',
-           'scenario_mount', 'scenario_messages', 'write_scenario_bag']
+           'scenario_mount', 'scenario_messages', 'write_scenario_bag', 'drive_through', 'write_drive_bag']
 
 #: Topics written by :func:`write_scenario_bag` (the node's default input topics).
 SCENARIO_TOPICS = {
@@ -172,3 +172,40 @@ def _compose(pose, mount):
     x, y, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
     return x + c * mount[0] - s * mount[1], y + s * mount[0] + c * mount[1], yaw + mount[2]
+
+
+def drive_through(types, ego, center, t_start: float, speed: float = 12.0, rate: float = 10.0,
+                  wait_s: float = 0.0) -> Iterator[tuple[float, str, object]]:
+    """``(t, topic, odometry)`` after a scenario: the ego waits ``wait_s`` at its stop position,
+    then drives straight through ``center`` and 60 m on (the pipeline starts on the next
+    intersection once it is ``reset_distance`` past it)."""
+    from msg_adapters.odometry import odometry_msg
+    p0 = ego.xy[-1]
+    d = np.asarray(center) - p0
+    yaw = math.atan2(d[1], d[0])
+    n_wait = int(round(wait_s * rate))
+    for k in range(1, n_wait + int((float(np.hypot(*d)) + 60.0) / speed * rate) + 1):
+        s = max(0, k - n_wait) * speed / rate
+        t = t_start + k / rate
+        yield t, SCENARIO_TOPICS['odometry'], odometry_msg(
+            types, t, p0[0] + s * math.cos(yaw), p0[1] + s * math.sin(yaw), yaw, vx=speed if s else 0.0,
+            frame_id=SCENARIO_FRAMES['fixed'], child_frame_id=SCENARIO_FRAMES['base'])
+
+
+def write_drive_bag(path, seeds, *, gap_s: float | None = None, sensors=('tracked',), wait_s: float = 4.0,
+                    t0: float = BAG_T0) -> Path:
+    """A drive through the simulated intersections ``seeds``, one after the other, in one bag:
+    after each the ego waits ``wait_s`` and drives through (``gap_s`` None), or the next
+    recording starts ``gap_s`` seconds after the last message (no drive through; a gap in
+    bag time)."""
+    from ..sim import simulate_scenario
+    with BagWriter(path) as w:
+        for seed in seeds:
+            sc = simulate_scenario(seed)
+            msgs = list(scenario_messages(sc, w.types, sensors=sensors, autoware=False, t0=t0))
+            if gap_s is None:
+                msgs += list(drive_through(w.types, sc.ego, sc.gt.center, t0 + sc.duration, wait_s=wait_s))
+            for t, topic, msg in msgs:
+                w.write(topic, msg, t)
+            t0 = msgs[-1][0] + (1.0 if gap_s is None else gap_s)
+    return Path(path)
