@@ -334,13 +334,14 @@ def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``bench`` subcommand."""
     p = subparsers.add_parser('bench', help='synthetic benchmark (paper Table I)',
                               description=__doc__.split('\n\n')[0])
-    p.add_argument('--n', type=int, default=1000, help='number of intersections')
+    from .cli import int_at_least
+    p.add_argument('--n', type=int_at_least(1), default=1000, help='number of intersections')
     p.add_argument('--mode', choices=MODES, default='tracked', help='detection input')
     p.add_argument('--samples', type=int, default=5000, help='topology MCMC samples')
     p.add_argument('--lane-samples', type=int, default=20000,
                    help='lane course MCMC samples (0 = skip the lane step)')
-    p.add_argument('--seed', type=int, default=0, help='case i uses scenario seed + i')
-    p.add_argument('--jobs', type=int, default=1, help='worker processes (spawn)')
+    p.add_argument('--seed', type=int_at_least(0), default=0, help='case i uses scenario seed + i')
+    p.add_argument('--jobs', type=int_at_least(1), default=1, help='worker processes (spawn)')
     p.add_argument('--json', metavar='OUT', help='write config, summary and all cases')
     p.add_argument('--oracle', action='store_true',
                    help='score the ground truth itself (sanity: must be perfect)')

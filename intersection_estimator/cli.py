@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from . import __version__
@@ -22,8 +23,49 @@ SUBCOMMANDS = (
 )
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with one-line errors (``PROG: error: ...``, exit 2) and help text without
+    Sphinx markup (the subcommands' descriptions are their module docstrings)."""
+
+    def error(self, message: str):
+        self.exit(2, f'{self.prog}: error: {" ".join(message.split())}\n')
+
+    def format_help(self) -> str:
+        return plain_doc(super().format_help())
+
+
+_ROLE = re.compile(r':(?:[a-z]+:)?[a-z]+:`~?\.*([^`<]*?)(?:\s*<[^>]*>)?`')
+
+
+def plain_doc(text: str | None) -> str | None:
+    """Sphinx / reST markup out of a docstring for the terminal: ``:class:`~.a.B``` -> ``B``,
+    ````x```` -> ``x``, ``:data:`.X``` -> ``X``; ``\\`` escapes dropped."""
+    if not text:
+        return text
+
+    def role(m):
+        name = m.group(1)
+        return name.rsplit('.', 1)[-1] if m.group(0).count('~') else name
+    text = _ROLE.sub(role, text)
+    return text.replace('``', '').replace('\\ ', '')
+
+
+def int_at_least(minimum: int):
+    """argparse ``type``: an integer >= ``minimum`` (a clear one-line error otherwise)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f'{value} out of range: must be >= {minimum}')
+        return value
+    parse.__name__ = f'integer >= {minimum}'
+    return parse
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog='intersection-estimator',
         description='Map-free lane-level intersection estimation (Meyer et al., ITSC 2019): '
                     'replay bags, simulate scenarios, evaluate and benchmark.')

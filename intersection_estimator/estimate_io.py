@@ -1,7 +1,8 @@
 """``estimate.json`` / ``gt.json`` read and write (DESIGN.md §4).
 
 ``estimate.json``: ``{"center", "arms", "lanes", "stats", "traffic_side"}`` with
-``Intersection.to_json`` / ``Lanelet.to_json`` entries. ``gt.json`` is the same schema
+``Intersection.to_json`` / ``Lanelet.to_json`` entries; a run that estimated no intersection
+writes ``center`` null and no arms, ``stats.state`` NO_DATA. ``gt.json`` is the same schema
 plus ``traffic`` per lane (trajectories using it), ``seed``, ``sim_config`` and a few
 scenario facts (``stop_m`` per arm, ``duration_s``, ``ego``). Output is deterministic:
 floats rounded to :data:`DIGITS` decimals, keys sorted, non-finite numbers written as
@@ -54,10 +55,17 @@ def _lane_arrays(ll: Lanelet) -> dict:
             'successors': list(ll.successors), 'confidence': float(ll.confidence)}
 
 
-def estimate_to_dict(intersection: Intersection, lanelets, stats: dict | None = None, *,
+def estimate_to_dict(intersection: Intersection | None, lanelets, stats: dict | None = None, *,
                      arrays: bool = False) -> dict:
     """The estimate.json document as a dict (not yet rounded). ``arrays=True`` keeps the
-    polylines as numpy arrays (for in-memory evaluation; :func:`dumps` still serialises it)."""
+    polylines as numpy arrays (for in-memory evaluation; :func:`dumps` still serialises it).
+
+    Without an intersection (a run that never estimated one) the document is valid and says
+    so: ``center`` and ``traffic_side`` null, no arms, no lanes, ``stats.state`` NO_DATA
+    (unless the stats say otherwise)."""
+    if intersection is None:
+        return {'center': None, 'arms': [], 'lanes': [], 'traffic_side': None,
+                'stats': {'state': 'NO_DATA', **dict(stats or {})}}
     d = intersection.to_json()
     d['traffic_side'] = int(intersection.traffic_side)
     lane = _lane_arrays if arrays else Lanelet.to_json
@@ -66,14 +74,19 @@ def estimate_to_dict(intersection: Intersection, lanelets, stats: dict | None = 
     return d
 
 
-def write_estimate(path, intersection: Intersection, lanelets, stats: dict | None = None) -> Path:
+def write_estimate(path, intersection: Intersection | None, lanelets, stats: dict | None = None) -> Path:
+    """Write estimate.json (see :func:`estimate_to_dict`; ``intersection`` None: NO_DATA)."""
     path = Path(path)
     path.write_text(dumps(estimate_to_dict(intersection, lanelets, stats)))
     return path
 
 
 def parse_estimate(d: dict) -> tuple[Intersection, list[Lanelet], dict]:
-    """estimate.json dict -> ``(Intersection, lanelets, stats)``; raises on malformed input."""
+    """estimate.json dict -> ``(Intersection, lanelets, stats)``; raises on malformed input
+    and ``ValueError`` (one line) on a valid estimate without an intersection (NO_DATA)."""
+    if isinstance(d, dict) and d.get('center', 0) is None:
+        state = (d.get('stats') or {}).get('state', 'NO_DATA')
+        raise ValueError(f'the estimate holds no intersection (state {state})')
     inter = Intersection.from_json(d)
     lanes = [Lanelet.from_json(x) for x in d.get('lanes', [])]
     return inter, lanes, dict(d.get('stats', {}))

@@ -29,6 +29,7 @@ import argparse
 import json
 import math
 from pathlib import Path
+import sys
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -418,6 +419,10 @@ def _cmd(args) -> int:
         out = {'summary': summary, 'cases': per_case}
         print(format_metrics(summary))
     elif args.estimate and args.gt:
+        missing = [f for f in (args.estimate, args.gt) if not Path(f).is_file()]
+        if missing:
+            print(f'evaluate: {missing[0]}: no such file', file=sys.stderr)
+            return 1
         out = evaluate_files(args.estimate, args.gt)
         print(format_metrics(out))
     else:

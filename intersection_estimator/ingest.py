@@ -21,18 +21,9 @@ from msg_adapters.errors import AdapterError
 from msg_adapters.odometry import EgoPose, EgoPoseBuffer, read_odometry
 
 from . import params as P
+from .roles import ODOMETRY, ROLE_TYPES, node_type
 
 __all__ = ['ROLE_TYPES', 'Ingest', 'RateLimitedLog']
-
-#: input role (parameter name) -> ROS message type
-ROLE_TYPES = {
-    'radar_topics': 'sensor_msgs/msg/PointCloud2',
-    'radar_scan_topics': 'radar_msgs/msg/RadarScan',
-    'detection_topics': 'geometry_msgs/msg/PoseArray',
-    'object_topics': 'intersection_estimator_msgs/msg/TrackedObjectArray',
-    'autoware_object_topics': 'autoware_perception_msgs/msg/TrackedObjects',
-    'odometry_topic': 'nav_msgs/msg/Odometry',
-}
 
 PENDING_MAX = 256        # messages held back waiting for the ego pose
 JUMP_S = 30.0            # a stamp this far from the time base is suspicious
@@ -87,9 +78,9 @@ class Ingest:
     # -- topics -----------------------------------------------------------------------------
     def topics(self) -> list[tuple[str, str, str]]:
         """(role, topic, message type) of every configured input."""
-        out = [(role, t, ROLE_TYPES[role]) for role, ts in P.topics(self.values).items() for t in ts]
-        if self.values['odometry_topic']:
-            out.append(('odometry_topic', self.values['odometry_topic'], ROLE_TYPES['odometry_topic']))
+        out = [(role, t, node_type(role)) for role, ts in P.topics(self.values).items() for t in ts]
+        if self.values[ODOMETRY]:
+            out.append((ODOMETRY, self.values[ODOMETRY], node_type(ODOMETRY)))
         return out
 
     def subscriptions(self) -> list[tuple[str, str, type]]:
@@ -268,6 +259,16 @@ class Ingest:
     def ego_pose(self) -> tuple[float, float, float] | None:
         p = self.ego.latest
         return None if p is None else (p.x, p.y, p.yaw)
+
+    def flush_pending(self) -> int:
+        """End of input (a replay's last message): the messages still held back for an ego
+        pose never get one; they are dropped and counted as ``no_ego_pose``. Returns how many."""
+        n, self._pending = len(self._pending), deque(maxlen=PENDING_MAX)
+        if n:
+            self.dropped['no_ego_pose'] += n
+            self.warn('no_ego_pose', f'{n} message(s) still waiting for an ego pose at the end of the input '
+                      'were dropped (is odometry recorded?)')
+        return n
 
     def forget_before(self, t: float) -> None:
         """After a reset: drop held-back messages older than ``t``."""

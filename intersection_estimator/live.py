@@ -1,8 +1,10 @@
-"""``replay --live``: publish bags over DDS at bag rate (a stand-in for ``ros2 bag play``).
+"""``replay --live``: publish bags over DDS at bag rate (a stand-in for ``ros2 bag play --clock``).
 
 The CDR bytes from the bag are published as they are (rclpy publishes serialised
 messages), so no decode/encode happens; topics whose message type is not installed as
-Python package are skipped with a note.
+Python package are skipped with a note. ``/clock`` (rosgraph_msgs/Clock) carries the bag
+time, at every message and at ``clock_hz`` in between, so that a node started with
+``use_sim_time:=true`` ticks in bag time (its timer follows /clock).
 """
 
 from __future__ import annotations
@@ -29,12 +31,15 @@ def _publishers(node, reader, latched_qos, default_qos):
     return pubs
 
 
-def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name: str = 'bag_player') -> int:
-    """Publish ``bags`` at ``rate`` x bag speed; waits up to ``wait_s`` for a subscriber."""
+def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name: str = 'bag_player',
+         clock_hz: float = 40.0) -> int:
+    """Publish ``bags`` at ``rate`` x bag speed, and ``/clock``; waits up to ``wait_s`` for a subscriber."""
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     if rate <= 0:
         raise ValueError(f'rate={rate} out of range: must be > 0')
+    if clock_hz <= 0:
+        raise ValueError(f'clock_hz={clock_hz} out of range: must be > 0')
     rclpy.init()
     node = rclpy.create_node(node_name)
     try:
@@ -44,19 +49,51 @@ def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name:
             pubs = _publishers(node, reader, latched, QoSProfile(depth=100))
             if not pubs:
                 raise BagError('no_usable_topic', 'no topic with an installed message type')
+            pubs.pop('/clock', None)   # a recorded /clock is replaced by ours
+            clock = _Clock(node, rate, clock_hz)
             end = time.monotonic() + wait_s
-            while time.monotonic() < end and not any(p.get_subscription_count() for p in pubs.values()):
+            while time.monotonic() < end and not any(p.get_subscription_count()
+                                                     for p in (clock.pub, *pubs.values())):
                 rclpy.spin_once(node, timeout_sec=0.05)
-            n, t0_bag, t0_wall = 0, None, time.monotonic()
+            n = 0
             for t_ns, topic, _, data in reader.raw_messages(topics=sorted(pubs)):
-                t0_bag = t_ns if t0_bag is None else t0_bag
-                delay = (t_ns - t0_bag) * 1e-9 / rate - (time.monotonic() - t0_wall)
-                if delay > 0:
-                    time.sleep(delay)
+                clock.until(t_ns)
                 pubs[topic].publish(bytes(data))
                 n += 1
-            print(f'live: published {n} messages on {len(pubs)} topics', file=sys.stderr)
+            from rclpy.duration import Duration
+            for p in (clock.pub, *pubs.values()):     # delivered before the node goes (reliable QoS)
+                p.wait_for_all_acked(Duration(seconds=2.0))
+            print(f'live: published {n} messages on {len(pubs)} topics and /clock', file=sys.stderr)
             return 2 if reader.truncated else 0
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+class _Clock:
+    """``/clock`` at bag time: sleeps until a bag time is due (at ``rate``), publishing the
+    interpolated bag time every ``1 / clock_hz`` wall seconds meanwhile (as ``ros2 bag play
+    --clock`` does), then that time itself."""
+
+    def __init__(self, node, rate: float, clock_hz: float):
+        from rclpy.qos import QoSProfile
+        from rosgraph_msgs.msg import Clock
+        self._msg = Clock
+        self.pub = node.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+        self.rate, self.step = rate, 1.0 / clock_hz
+        self.t0_bag = self.t0_wall = None
+
+    def publish(self, t_ns: int) -> None:
+        msg = self._msg()
+        msg.clock.sec, msg.clock.nanosec = divmod(int(t_ns), 10**9)
+        self.pub.publish(msg)
+
+    def until(self, t_ns: int) -> None:
+        if self.t0_bag is None:
+            self.t0_bag, self.t0_wall = t_ns, time.monotonic()
+        due = self.t0_wall + (t_ns - self.t0_bag) * 1e-9 / self.rate
+        while (left := due - time.monotonic()) > 0:
+            time.sleep(min(left, self.step))
+            now = min(time.monotonic(), due)
+            self.publish(self.t0_bag + int((now - self.t0_wall) * self.rate * 1e9))
+        self.publish(t_ns)

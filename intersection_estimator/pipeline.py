@@ -20,7 +20,8 @@ from .model import Intersection, Lanelet
 from .observations import Detections
 from .topology import TopologyConfig, TopologyEstimator
 
-__all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'mode_of']
+__all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'mode_of', 'needs_sampling',
+           'IDLE_SAMPLING_TICKS']
 
 
 @dataclass
@@ -198,6 +199,7 @@ class OnlineEstimator:
         self._lane_key = None
         self._lane_t = -np.inf
         self._dirty = False
+        self._idle_ticks = 0              # ticks since the last new observations
         self._approached = False
         self._restart_n, self._races = 0, 0
         self._convergence = ConvergenceTracker(self.config.convergence)
@@ -206,6 +208,12 @@ class OnlineEstimator:
     @property
     def n_observations(self) -> int:
         return self._n
+
+    @property
+    def idle(self) -> bool:
+        """Would the next tick draw no sample (unchanged, converged estimate; see
+        :func:`needs_sampling`)? Its result is then the previous one."""
+        return not needs_sampling(self._dirty, self.result.state, self._idle_ticks)
 
     def window(self) -> Detections:
         """The observations currently in the window."""
@@ -265,6 +273,13 @@ class OnlineEstimator:
         topo_end = t0 + total * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)
         with self._lock:
             dirty, self._dirty = self._dirty, False
+            self._idle_ticks = 0 if dirty else self._idle_ticks + 1
+            if not needs_sampling(dirty, self.result.state, self._idle_ticks - 1):
+                # nothing new and converged: the estimate stands, at no cost (an idle node,
+                # a gap in bag time); sampling resumes with the next observations
+                self.result = replace(self.result, timing_ms={'topology': 0.0, 'lanes': 0.0, 'total': 0.0},
+                                      lanes_updated=False)
+                return self.result
             dets = self._window(now) if dirty else Detections.concat(self._parts)
         restart = False
         if dirty:
@@ -339,6 +354,22 @@ class OnlineEstimator:
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
         return self._lanes.lanelets
+
+
+#: Ticks on unchanged observations that still sample while the topology has not converged.
+IDLE_SAMPLING_TICKS = 25
+
+
+def needs_sampling(new_data: bool, state: str, idle_ticks: int) -> bool:
+    """Does a tick draw samples? Always when observations arrived since the last tick; on
+    unchanged ones only while the topology chain has not converged (§II-C: no better state
+    within ``converge_window`` samples after the annealing) and for at most
+    :data:`IDLE_SAMPLING_TICKS` ticks (``idle_ticks`` = ticks without new data before this
+    one). A converged estimate on the same posterior is left as it is until new data come:
+    an idle node or a gap in bag time costs next to nothing."""
+    if new_data:
+        return True
+    return state != 'CONVERGED' and idle_ticks < IDLE_SAMPLING_TICKS
 
 
 #: Least share of the tick budget a step gets even when the tick is already late.

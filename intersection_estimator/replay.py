@@ -5,67 +5,54 @@ Offline and deterministic by default: messages are fed in bag order through the 
 at the node's period in *bag time*, and each tick spends a sample budget (so the result
 does not depend on machine speed, and ``estimate.json`` is byte-identical for the same bag
 and seed: its ``stats.elapsed_s`` is 0, the wall time is in the printed summary;
-``--budget-mode wall`` spends the node's wall budget instead). Writes ``estimate.json``,
-``lanelets.osm``, ``estimate.png`` and
-``output.mcap`` (the node's ``~/topology``, ``~/lanelets``, ``~/markers``).
-``--live`` instead publishes the bag over DDS at bag rate for a running node.
+``--budget-mode wall`` spends the node's wall budget instead). A converged estimate with no
+new data does not sample (a gap in bag time costs nothing): such idle ticks in a row are
+written to ``output.mcap`` once.
+
+Outputs, in ``--out`` (written to a temporary folder beside it and moved into place at the
+end, so a failed run leaves the previous results as they were):
+
+* ``estimate.json``, ``lanelets.osm``, ``estimate.png``: the *last* intersection estimated;
+  without any, ``estimate.json`` of state NO_DATA (``center`` null, no arms) whose
+  ``stats`` hold the input counts (``received``, ``dropped`` per reason) and ``why``;
+* ``intersections/NN/`` (00, 01, ...): the same three files for every intersection of the
+  drive, in order (the pipeline starts on the next one when the ego has passed one, or when
+  the time base jumps, e.g. two recordings in one replay);
+* ``output.mcap``: the node's ``~/topology``, ``~/lanelets``, ``~/markers``.
+
+Exit codes: 0 an intersection was estimated; 1 unusable input or bad arguments (one line on
+stderr, nothing written); 2 a bag was damaged, the estimate uses what could be read; 3 no
+intersection could be estimated (NO_DATA estimate written, the reason printed).
+``--live`` instead publishes the bag over DDS at bag rate (and ``/clock``) for a running node.
 """
 
 from __future__ import annotations
 
-import argparse
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import json
 from pathlib import Path
 import shutil
 import sys
+import tempfile
 import time
 
 from . import params as P
 from .bagio import BagError, BagWriter, open_bags, typestore
-from .ingest import ROLE_TYPES, Ingest, tick
+from .ingest import Ingest, tick
 from .pipeline import OnlineEstimator
+from .replay_report import (EXIT_DAMAGED, EXIT_NO_INTERSECTION, EXIT_OK, EXIT_UNUSABLE, Intersection,
+                            ReplaySummary, WarningLog, why_no_intersection)
+from .roles import ODOMETRY, TRACK_TYPES
 
-__all__ = ['ReplaySummary', 'replay', 'register']
+__all__ = ['ReplaySummary', 'replay', 'register', 'EXIT_OK', 'EXIT_UNUSABLE', 'EXIT_DAMAGED',
+           'EXIT_NO_INTERSECTION']
 
 NODE = 'intersection_estimator'
 OUTPUT_TOPICS = {'topology': ('/intersection_estimator/topology', 'intersection_estimator_msgs/msg/Topology'),
                  'lanelets': ('/intersection_estimator/lanelets', 'intersection_estimator_msgs/msg/LaneletArray'),
                  'markers': ('/intersection_estimator/markers', 'visualization_msgs/msg/MarkerArray')}
-
-
-@dataclass
-class ReplaySummary:
-    """What a replay did (printed by the CLI, returned to callers and tests)."""
-
-    messages: int
-    ticks: int
-    result: object
-    files: dict
-    dropped: dict
-    wall_s: float
-    truncated: str = ''
-
-    def lines(self) -> list[str]:
-        r = self.result
-        out = [f'replayed {self.messages} messages, {self.ticks} ticks in {self.wall_s:.2f} s']
-        if self.truncated:
-            out.append(f'WARNING: bag truncated ({self.truncated}); estimate uses what could be read')
-        if r is None or r.intersection is None:
-            out.append('no intersection estimated (no usable observations)')
-        else:
-            I = r.intersection
-            out.append(f'center ({I.center[0]:.2f}, {I.center[1]:.2f}) m, {len(I.arms)} arms, '
-                       f'state {r.state}, {r.topology_samples} topology + {r.lane_samples} lane samples')
-            for i, a in enumerate(I.arms):
-                out.append(f'  arm {i}: {a.angle * 57.29577951308232:7.1f} deg, gap {a.gap:.1f} m, '
-                           f'lanes in/out {a.lanes_in}/{a.lanes_out}, width {a.lane_width:.2f} m')
-            kinds = {k: sum(1 for l in r.lanelets if l.kind == k) for k in ('entering', 'leaving', 'connector')}
-            out.append('lanelets: ' + ', '.join(f'{v} {k}' for k, v in kinds.items()))
-        if self.dropped:
-            out.append('dropped: ' + ', '.join(f'{k} {v}' for k, v in sorted(self.dropped.items())))
-        out += [f'wrote {p}' for p in self.files.values()]
-        return out
+#: What a replay writes into ``--out`` (and replaces there, nothing else).
+OUTPUT_NAMES = ('estimate.json', 'lanelets.osm', 'estimate.png', 'output.mcap', 'intersections')
 
 
 def _values(params_file: str | None, seed: int | None, overrides: dict) -> dict:
@@ -79,99 +66,192 @@ def _values(params_file: str | None, seed: int | None, overrides: dict) -> dict:
     return values
 
 
-#: bagio's detected role -> the node's parameter (input role)
-_BAG_ROLES = {'radar_clouds': 'radar_topics', 'radar_scans': 'radar_scan_topics',
-              'pose_arrays': 'detection_topics', 'tracked_objects': 'object_topics',
-              'detected_objects': 'object_topics',
-              'odometry': 'odometry_topic'}
-
-
-def _roles(reader, values: dict, configured: bool) -> dict[str, str]:
+def _roles(reader, values: dict, configured: bool, wlog: WarningLog) -> dict[str, str]:
     """topic -> input role: the topics a params file names, else found by message type.
 
-    Found by type, one tracked-objects topic is used (the same tracks published in two
-    message families would count twice) and one odometry topic.
+    Found by type, one topic carrying tracks is used (the same tracks published in two
+    message families would count twice) and one odometry topic; the others are noted.
     """
-    present = {t.topic for t in reader.topics}
+    present = {t.topic: t.msgtype for t in reader.topics}
     if configured:
         wanted = {t: role for role, ts in P.topics(values).items() for t in ts}
-        if values['odometry_topic']:
-            wanted[values['odometry_topic']] = 'odometry_topic'
-        return {t: r for t, r in wanted.items() if t in present}
+        if values[ODOMETRY]:
+            wanted[values[ODOMETRY]] = ODOMETRY
+        missing = sorted(t for t in wanted if t not in present)
+        roles = {t: r for t, r in wanted.items() if t in present}
+        have = ', '.join(f'{t} [{m}]' for t, m in sorted(present.items())) or 'no topics'
+        if set(roles.values()) <= {ODOMETRY}:
+            raise BagError('no_usable_topic', f'none of the configured input topics '
+                           f'({", ".join(t for t in missing if wanted[t] != ODOMETRY)}) is in the bag; '
+                           f'it has: {have}')
+        if missing:
+            wlog.info(f'configured topic(s) not in the bag(s): {", ".join(missing)}')
+        return roles
     found = reader.detect_topics()
-    for single in ('tracked_objects', 'odometry'):
-        if single in found:
-            found[single] = found[single][:1]
-    return {t: _BAG_ROLES[role] for role, topics in found.items() for t in topics}
+    roles = {t: role for role, ts in found.items() for t in ts}
+    for group in (sorted(t for t in roles if present[t] in TRACK_TYPES), found.get(ODOMETRY, [])):
+        for t in group[1:]:
+            del roles[t]
+        if len(group) > 1:
+            wlog.info(f'using {group[0]}; also found by type, not used: {", ".join(group[1:])}')
+    if ODOMETRY not in roles.values():
+        wlog.note('no odometry (nav_msgs/Odometry) in the bag(s): observations in a sensor frame '
+                     'need the ego pose')
+    return roles
+
+
+class _Recorder(OnlineEstimator):
+    """The node's estimator, keeping the estimate of every intersection it finished (the
+    result before each reset: ego passed, time base moved)."""
+
+    def __init__(self, config, seed, clock):
+        self.finished: list[Intersection] = []
+        self.ending, self.clock = 'time_base_reset', clock
+        super().__init__(config, seed)
+
+    def reset(self) -> None:
+        r = getattr(self, 'result', None)
+        if r is not None and r.intersection is not None:
+            self.finished.append(Intersection(r, self.window(), self.ending, self.clock()))
+        self.ending = 'time_base_reset'
+        super().reset()
+
+
+@dataclass
+class _Run:
+    """State of one replay while it reads the bags."""
+
+    ingest: Ingest
+    estimator: _Recorder
+    writer: BagWriter | None
+    values: dict
+    wall_budget: bool
+    log: WarningLog
+    messages: int = 0
+    ticks: int = 0
+    idle_ticks: int = 0
+    detections: int = 0
+    marker_keys: set = field(default_factory=set)
 
 
 def replay(bags: list[str], out: str | Path, *, params_file: str | None = None, seed: int | None = None,
-           budget_mode: str = 'samples', progress: bool = True, write_outputs: bool = True) -> ReplaySummary:
-    """Run the pipeline over ``bags``; raises :class:`BagError` with a one-line reason."""
-    from msg_adapters.types import RosbagsTypes
+           budget_mode: str = 'samples', progress: bool = True, write_outputs: bool = True,
+           log=None) -> ReplaySummary:
+    """Run the pipeline over ``bags``; raises :class:`BagError` with a one-line reason.
+
+    ``log``: called with each warning line (the ingest warnings the node would log, at most
+    one per reason per 5 s of bag time; notes on the input) -- default: kept in the summary only.
+    """
     t_start = time.perf_counter()
     values = _values(params_file, seed, {})
-    out = Path(out)
-    writer = None
-    n_msgs = n_ticks = 0
+    out, wlog = Path(out), WarningLog(log)
     with open_bags(bags) as reader:
-        roles = _roles(reader, values, params_file is not None)
-        if not roles or set(roles.values()) == {'odometry_topic'}:
+        for note in reader.notes:
+            wlog.note(note)
+        roles = _roles(reader, values, params_file is not None, wlog)
+        if not roles or set(roles.values()) == {ODOMETRY}:
             raise BagError('no_usable_topic', 'none of the configured input topics is in the bag')
-        types = RosbagsTypes(typestore())
-        ingest = Ingest(values, types)
-        estimator = OnlineEstimator(P.pipeline_config(values), seed=values['seed'])
-        if write_outputs:
-            out.mkdir(parents=True, exist_ok=True)
-            shutil.rmtree(out / '.output_bag', ignore_errors=True)
-            writer = BagWriter(out / '.output_bag')
-        period_ns = int(round(values['timer_period'] * 1e9))
-        next_tick = None
-        total = sum(t.count for t in reader.topics if t.topic in roles)
-        for m in _progress(reader.messages(topics=sorted(roles)), progress, total):
-            n_msgs += 1
-            ingest.handle(roles[m.topic], m.msg, estimator)
-            next_tick = m.t_ns + period_ns if next_tick is None else next_tick
-            while m.t_ns >= next_tick:
-                n_ticks += _tick(ingest, estimator, budget_mode, writer, values, next_tick)
-                next_tick += period_ns
-        if next_tick is not None:
-            n_ticks += _tick(ingest, estimator, budget_mode, writer, values, next_tick)
-        damage = [str(p) for p in reader.problems]
-        if n_msgs < total:          # corrupt bytes inside a readable chunk: skipped, but not silently
-            damage.append(f'{total - n_msgs} of {total} indexed messages could not be read')
-        truncated = '; '.join(damage)
-    if writer is not None:
-        writer.close()
-        _single_mcap(out / '.output_bag', out / 'output.mcap')
-    result = estimator.result if n_ticks else None
-    files = _write_files(out, result, estimator, values, budget_mode == 'samples') if write_outputs else {}
-    if writer is not None:
-        files['output'] = str(out / 'output.mcap')
-    return ReplaySummary(n_msgs, n_ticks, result, files, dict(ingest.dropped),
-                         time.perf_counter() - t_start, truncated or '')
+        tmp = _temp_dir(out) if write_outputs else None
+        try:
+            run = _start(values, tmp, budget_mode == 'wall', wlog)
+            total = sum(t.count for t in reader.topics if t.topic in roles)
+            _feed(run, reader, roles, progress, total)
+            damage = [str(p) for p in reader.problems]
+            if run.messages < total:   # corrupt bytes inside a readable chunk: skipped, not silently
+                damage.append(f'{total - run.messages} of {total} indexed messages could not be read')
+            summary = _finish(run, tmp, budget_mode == 'samples', '; '.join(damage))
+            if tmp is not None:
+                summary.files = _move_into_place(tmp, out, summary.files)
+        finally:
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+    summary.wall_s = time.perf_counter() - t_start
+    return summary
 
 
-def _tick(ingest, estimator, budget_mode, writer, values, t_ns) -> int:
-    result = tick(ingest, estimator, wall_budget=budget_mode == 'wall')
-    if result is None or writer is None:
-        return int(result is not None)
+def _start(values, tmp, wall_budget: bool, wlog) -> _Run:
+    from msg_adapters.types import RosbagsTypes
+    ingest = Ingest(values, RosbagsTypes(typestore()))
+    estimator = _Recorder(P.pipeline_config(values), values['seed'], lambda: ingest.latest_stamp)
+    writer = BagWriter(tmp / '.output_bag') if tmp is not None else None
+    return _Run(ingest, estimator, writer, values, wall_budget, wlog)
+
+
+def _feed(run: _Run, reader, roles: dict, progress: bool, total: int) -> None:
+    """Every message through Ingest, ticks at the node's period in bag time."""
+    period_ns = int(round(run.values['timer_period'] * 1e9))
+    next_tick = None
+    for m in _progress(reader.messages(topics=sorted(roles)), progress, total):
+        run.messages += 1
+        run.detections += run.ingest.handle(roles[m.topic], m.msg, run.estimator)
+        run.log.emit(run.ingest.pop_warnings(), m.t)
+        next_tick = m.t_ns + period_ns if next_tick is None else next_tick
+        while m.t_ns >= next_tick:
+            _tick(run, next_tick)
+            next_tick += period_ns
+            if m.t_ns >= next_tick and run.estimator.idle:
+                # no message since this tick and nothing to sample: the ticks up to this message
+                # would repeat it exactly -- one stands for them (a gap in bag time costs nothing)
+                skip = (m.t_ns - next_tick) // period_ns
+                run.idle_ticks += skip
+                next_tick += skip * period_ns
+    if next_tick is not None:
+        _tick(run, next_tick)
+    run.ingest.flush_pending()
+    run.log.emit(run.ingest.pop_warnings(), None)
+
+
+def _tick(run: _Run, t_ns: int) -> None:
+    def passed(text):
+        run.estimator.ending = 'ego_passed'
+        run.log.note(f'{text} (bag time {t_ns * 1e-9:.3f} s)')
+    result = tick(run.ingest, run.estimator, wall_budget=run.wall_budget, log=passed)
+    if result is None:
+        return
+    run.ticks += 1
+    if run.writer is not None:
+        _publish(run, result, t_ns * 1e-9)
+
+
+def _publish(run: _Run, result, t: float) -> None:
+    """The node's output messages of one tick into output.mcap."""
     from msg_adapters.lanelets import lanelets_msg
     from msg_adapters.markers import markers_msg
     from msg_adapters.topology import topology_msg
     from msg_adapters.types import make_header
-    types, t = writer.types, t_ns * 1e-9
-    header = make_header(types, values['fixed_frame'], t)
+    writer = run.writer
+    types = writer.types
+    header = make_header(types, run.values['fixed_frame'], t)
     topo = topology_msg(types, header, result.intersection, result.topology_samples,
                         result.log_posterior, result.observations, result.state)
     writer.write(OUTPUT_TOPICS['topology'][0], topo, t)
     if result.intersection is not None and result.lanes_updated:
         writer.write(OUTPUT_TOPICS['lanelets'][0], lanelets_msg(types, header, result.lanelets,
                                                                 result.lane_samples), t)
-        markers, writer.marker_keys = markers_msg(types, header, result.intersection, result.lanelets,
-                                                  getattr(writer, 'marker_keys', set()))
+        markers, run.marker_keys = markers_msg(types, header, result.intersection, result.lanelets,
+                                               run.marker_keys)
         writer.write(OUTPUT_TOPICS['markers'][0], markers, t)
-    return 1
+
+
+def _finish(run: _Run, tmp, deterministic: bool, truncated: str) -> ReplaySummary:
+    """The intersections of the drive, the summary and (with ``tmp``) the files."""
+    est = run.estimator
+    last = est.result if run.ticks else None
+    done = list(est.finished)
+    if last is not None and last.intersection is not None:
+        done.append(Intersection(last, est.window(), 'end_of_input', run.ingest.latest_stamp))
+    ing = run.ingest
+    why = '' if done else why_no_intersection(ing.received, ing.dropped, run.detections, run.messages)
+    summary = ReplaySummary(run.messages, run.ticks, done[-1].result if done else last, {}, dict(ing.dropped),
+                            0.0, truncated, intersections=done, received=dict(ing.received), notes=run.log.lines, infos=run.log.infos,
+                            idle_ticks=run.idle_ticks, why=why)
+    if run.writer is not None:
+        run.writer.close()
+        _single_mcap(tmp / '.output_bag', tmp / 'output.mcap')
+    if tmp is not None:
+        summary.files = _write_files(tmp, summary, run.values, deterministic)
+        summary.files['output'] = str(tmp / 'output.mcap')
+    return summary
 
 
 def _single_mcap(bag_dir: Path, target: Path) -> None:
@@ -183,22 +263,60 @@ def _single_mcap(bag_dir: Path, target: Path) -> None:
     shutil.rmtree(bag_dir)
 
 
-def _write_files(out: Path, result, estimator, values, deterministic: bool = True) -> dict:
-    from .estimate_io import write_estimate
+def _write_files(out: Path, summary: ReplaySummary, values, deterministic: bool) -> dict:
+    """estimate.json (+ osm, png) per intersection into ``intersections/NN``, the last one
+    (or the NO_DATA estimate) also at the top."""
+    counts = {'received': summary.received, 'dropped': summary.dropped,
+              'intersections': len(summary.intersections)}
+    if not summary.intersections:
+        from .estimate_io import write_estimate
+        stats = dict(summary.result.stats() if summary.result is not None else {}, **counts,
+                     why=summary.why, state='NO_DATA')
+        if deterministic:
+            stats['elapsed_s'] = 0.0
+        return {'estimate': str(write_estimate(out / 'estimate.json', None, [], stats))}
     files = {}
-    I = None if result is None else result.intersection
-    lanelets = [] if result is None else result.lanelets
-    stats = {} if result is None else result.stats()
-    if deterministic and stats:
+    for k, item in enumerate(summary.intersections):
+        files = _write_one(out / 'intersections' / f'{k:02d}', item, dict(counts, index=k), deterministic)
+    for key, path in list(files.items()):
+        files[key] = str(shutil.copy2(path, out / Path(path).name))
+    return files
+
+
+def _write_one(folder: Path, item: Intersection, counts: dict, deterministic: bool) -> dict:
+    from .estimate_io import write_estimate
+    from .export.osm import write_osm
+    from .export.plot import plot_estimate
+    folder.mkdir(parents=True, exist_ok=True)
+    r = item.result
+    stats = dict(r.stats(), **counts, ended=item.ended, t_end=item.t_end)
+    if deterministic:
         # same bag + seed -> byte-identical estimate.json: no wall time in it (the summary has it)
         stats['elapsed_s'] = 0.0
-    files['estimate'] = str(write_estimate(out / 'estimate.json', I, lanelets, stats))
-    if I is not None:
-        from .export.osm import write_osm
-        from .export.plot import plot_estimate
-        files['osm'] = str(write_osm(out / 'lanelets.osm', lanelets))
-        files['plot'] = str(plot_estimate(out / 'estimate.png', I, lanelets, dets=estimator.window()))
-    return files
+    return {'estimate': str(write_estimate(folder / 'estimate.json', r.intersection, r.lanelets, stats)),
+            'osm': str(write_osm(folder / 'lanelets.osm', r.lanelets)),
+            'plot': str(plot_estimate(folder / 'estimate.png', r.intersection, r.lanelets, dets=item.window))}
+
+
+def _temp_dir(out: Path) -> Path:
+    """A fresh folder beside ``out`` (same file system: the final move is a rename)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.tmp', dir=out.parent))
+
+
+def _move_into_place(tmp: Path, out: Path, files: dict) -> dict:
+    """Replace the replay outputs in ``out`` (old ones included, also those this run did not
+    write: no stale png beside a new estimate) by the new ones; other files stay."""
+    out.mkdir(parents=True, exist_ok=True)
+    for name in OUTPUT_NAMES:
+        old = out / name
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old)
+        elif old.exists() or old.is_symlink():
+            old.unlink()
+    for item in sorted(tmp.iterdir()):
+        item.rename(out / item.name)
+    return {k: str(out / Path(v).relative_to(tmp)) for k, v in files.items()}
 
 
 def _progress(it, enabled: bool, total: int):
@@ -210,24 +328,40 @@ def _progress(it, enabled: bool, total: int):
 
 
 # -- command line -------------------------------------------------------------------------------
+_EPILOG = ('exit codes: 0 intersection estimated; 1 unusable input or arguments (nothing written); '
+           '2 bag damaged, estimate from what could be read; 3 no intersection estimated '
+           '(estimate.json of state NO_DATA written, the reason printed)')
+
+
 def register(sub) -> None:
     p = sub.add_parser('replay', help='run the estimator over rosbag2 bags (MCAP, sqlite3)',
-                       description=__doc__)
+                       description=__doc__, epilog=_EPILOG, formatter_class=_raw())
     p.add_argument('bags', nargs='+', help='rosbag2 bag directories or .mcap / .db3 files')
     p.add_argument('--out', default='replay_out', help='output directory (default: replay_out)')
     p.add_argument('--params', help='parameter YAML (default: built-in defaults, topics found by type)')
     p.add_argument('--seed', type=int, help='seed (overrides the params file)')
     p.add_argument('--budget-mode', choices=('samples', 'wall'), default='samples',
                    help='samples: deterministic sample budget per tick (default); wall: the node\'s time budget')
-    p.add_argument('--live', action='store_true', help='publish the bag over DDS at bag rate instead')
+    p.add_argument('--live', action='store_true', help='publish the bag over DDS at bag rate (and /clock) instead')
     p.add_argument('--rate', type=float, default=1.0, help='--live playback rate (default 1.0)')
     p.add_argument('--json', action='store_true', help='print the summary as JSON')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=_main)
-    d = sub.add_parser('demo', help='replay the bundled sample bag into demo_out/ and summarise')
-    d.add_argument('--out', default='demo_out')
+    d = sub.add_parser('demo', help='replay the bundled sample bag into demo_out/ and summarise',
+                       description='Replay the bundled sample bag (deterministic) and score the estimate '
+                                   'against its ground truth.', epilog=_EPILOG)
+    d.add_argument('--out', default='demo_out', help='output directory (default: demo_out)')
     d.add_argument('--bag', default=None, help='bag to use (default: the bundled tracked-objects bag)')
     d.set_defaults(func=_demo)
+
+
+def _raw():
+    import argparse
+    return argparse.RawDescriptionHelpFormatter
+
+
+def _stderr(line: str) -> None:
+    print(f'replay: {line}', file=sys.stderr)
 
 
 def _main(args) -> int:
@@ -236,23 +370,20 @@ def _main(args) -> int:
             from .live import play
             return play(args.bags, rate=args.rate)
         summary = replay(args.bags, args.out, params_file=args.params, seed=args.seed,
-                         budget_mode=args.budget_mode, progress=not args.quiet)
+                         budget_mode=args.budget_mode, progress=not args.quiet, log=_stderr)
     except (BagError, ValueError, OSError) as exc:
-        print(f'replay: {_one_line(exc)}', file=sys.stderr)
-        return 1
+        _stderr(_one_line(exc))
+        return EXIT_UNUSABLE
     except Exception as exc:  # noqa: BLE001 - whatever a damaged bag provokes: one line, not a traceback
-        print(f'replay: failed: {type(exc).__name__}: {_one_line(exc)}', file=sys.stderr)
-        return 1
+        _stderr(f'failed: {type(exc).__name__}: {_one_line(exc)}')
+        return EXIT_UNUSABLE
     if summary.truncated:
-        print(f'replay: bag damaged ({_one_line(summary.truncated)}); wrote the estimate from the '
-              f'{summary.messages} messages that could be read', file=sys.stderr)
-    if args.json:
-        print(json.dumps({'messages': summary.messages, 'ticks': summary.ticks, 'files': summary.files,
-                          'dropped': summary.dropped, 'wall_s': summary.wall_s,
-                          'truncated': summary.truncated}, indent=1))
-    else:
-        print('\n'.join(summary.lines()))
-    return 2 if summary.truncated else 0
+        _stderr(f'bag damaged ({_one_line(summary.truncated)}); wrote the estimate from the '
+                f'{summary.messages} messages that could be read')
+    if summary.why:
+        _stderr(f'no intersection estimated: {summary.why}')
+    print(json.dumps(summary.to_json(), indent=1) if args.json else '\n'.join(summary.lines()))
+    return summary.exit_code
 
 
 def _one_line(text) -> str:
@@ -271,17 +402,17 @@ def _demo(args) -> int:
     bag = Path(args.bag) if args.bag else bundled_bag()
     print(f'demo: replaying {bag} (deterministic, sample budget per tick)')
     try:
-        summary = replay([str(bag)], args.out, progress=True)
+        summary = replay([str(bag)], args.out, progress=True, log=_stderr)
     except (BagError, ValueError, OSError) as exc:
-        print(f'demo: {exc}', file=sys.stderr)
-        return 1
+        print(f'demo: {_one_line(exc)}', file=sys.stderr)
+        return EXIT_UNUSABLE
     print('\n'.join(summary.lines()))
     gt = bag.parent / f'{bag.name}.gt.json'
-    if gt.exists() and 'estimate' in summary.files:
+    if gt.exists() and summary.intersections:
         from .evaluate import evaluate_files
         m = evaluate_files(summary.files['estimate'], str(gt))
         keys = ('arm_correct', 'topology_correct', 'center_error_m', 'lane_error_cm', 'lane_recall',
                 'connectivity_recall')
         fmt = (lambda v: f'{v:.3g}' if isinstance(v, float) else str(v))
         print('against ground truth: ' + ', '.join(f'{k} {fmt(m.get(k))}' for k in keys))
-    return 2 if summary.truncated else 0
+    return summary.exit_code

@@ -22,15 +22,13 @@ import time
 import numpy as np
 
 from . import params as P
-from .bagio import BAG_T0, SCENARIO_TOPICS, scenario_messages, scenario_mount, typestore
+from .bagio import BAG_T0, drive_through, scenario_messages, scenario_mount, typestore
 from .ingest import Ingest, tick
 from .pipeline import OnlineEstimator
+from .roles import role_of_type
 from .sim import simulate_scenario
 
 __all__ = ['SoakReport', 'soak', 'rss_mb', 'register']
-
-_ROLE_OF_TOPIC = {SCENARIO_TOPICS['odometry']: 'odometry_topic', SCENARIO_TOPICS['radar']: 'radar_topics',
-                  SCENARIO_TOPICS['objects']: 'object_topics', SCENARIO_TOPICS['detections']: 'detection_topics'}
 
 
 def rss_mb() -> float:
@@ -74,21 +72,6 @@ class SoakReport:
                 'dropped: ' + (', '.join(f'{k} {v}' for k, v in sorted(self.dropped.items())) or 'nothing')]
 
 
-def _drive_through(types, ego, center, t_start: float, speed: float = 12.0, rate: float = 10.0):
-    """Odometry of the ego leaving its stop position straight through the center and 60 m on."""
-    from msg_adapters.odometry import odometry_msg
-    p0 = ego.xy[-1]
-    d = np.asarray(center) - p0
-    yaw = math.atan2(d[1], d[0])
-    length = float(np.hypot(*d)) + 60.0
-    for k in range(1, int(length / speed * rate) + 1):
-        s = k * speed / rate
-        t = t_start + k / rate
-        yield t, SCENARIO_TOPICS['odometry'], odometry_msg(
-            types, t, p0[0] + s * math.cos(yaw), p0[1] + s * math.sin(yaw), yaw, vx=speed,
-            frame_id='map', child_frame_id='base_link')
-
-
 def soak(minutes: float, *, seed: int = 0, sensors=('tracked', 'raw'), topology_samples: int = 1000,
          lane_samples: int = 2000, period: float = 0.5, warmup_minutes: float | None = None,
          progress: bool = True) -> SoakReport:
@@ -110,11 +93,12 @@ def soak(minutes: float, *, seed: int = 0, sensors=('tracked', 'raw'), topology_
         ingest.configure(mount)
         msgs = scenario_messages(sc, types, sensors=sensors, autoware=False, t0=BAG_T0 + sim_t)
         last_t = BAG_T0 + sim_t
-        for stream in (msgs, _drive_through(types, sc.ego, sc.gt.center, BAG_T0 + sim_t + sc.duration)):
+        for stream in (msgs, drive_through(types, sc.ego, sc.gt.center, BAG_T0 + sim_t + sc.duration)):
             for t, topic, msg in stream:
-                if topic not in _ROLE_OF_TOPIC:
+                role = role_of_type(msg.__msgtype__)    # the one role table (.roles)
+                if role is None:                         # /tf_static: the mount is configured
                     continue
-                ingest.handle(_ROLE_OF_TOPIC[topic], msg, est)
+                ingest.handle(role, msg, est)
                 report.messages += 1
                 last_t = t
                 next_tick = t + period if next_tick is None else next_tick

@@ -20,7 +20,7 @@ from intersection_estimator.observations import Detections
 
 from .errors import AdapterError, guarded
 from .odometry import EgoPoseBuffer, apply
-from .pointcloud2 import RadarCloud, read_pointcloud2
+from .pointcloud2 import DOPPLER_NAMES, RadarCloud, read_pointcloud2
 from .pose_array import read_pose_array
 from .radar_scan import read_radar_scan
 from .tracked_objects import MIN_SPEED_FOR_HEADING, read_objects
@@ -101,6 +101,13 @@ def radar_detections(msg, ego: EgoPoseBuffer, opts: AdapterOptions = AdapterOpti
     else:
         cloud = read_pointcloud2(msg, doppler_field=opts.doppler_field, doppler_sign=opts.doppler_sign,
                                  rcs_field=opts.rcs_field, max_points=opts.max_points)
+        if len(cloud) and not cloud.doppler_field:
+            # radar points without Doppler carry no direction of travel: nothing to estimate from
+            names = ', '.join(str(f.name) for f in msg.fields)
+            wanted = opts.doppler_field or DOPPLER_NAMES
+            wanted = wanted if isinstance(wanted, str) else ', '.join(wanted)
+            raise AdapterError('no_doppler', f'PointCloud2 without a Doppler field (fields {names}; '
+                               f'looked for {wanted}; set doppler_field)')
     return _radar(cloud, ego, opts)
 
 

@@ -92,11 +92,12 @@ def test_scenario_bag_topics_frames_and_counts(scenario, scenario_bag):
         assert frames[SCENARIO_TOPICS['radar']] == 'radar'
         assert frames[SCENARIO_TOPICS['odometry']] == 'map'
         assert {frames[t] for t in MODE_OF if t != SCENARIO_TOPICS['radar']} == {'map'}
-        assert bags.detect_topics() == {
-            'odometry': [SCENARIO_TOPICS['odometry']],
-            'radar_clouds': [SCENARIO_TOPICS['radar']],
-            'pose_arrays': [SCENARIO_TOPICS['detections']],
-            'tracked_objects': sorted([SCENARIO_TOPICS['objects'], SCENARIO_TOPICS['autoware']])}
+        assert bags.detect_topics() == {          # keyed by input role (node parameter), .roles
+            'odometry_topic': [SCENARIO_TOPICS['odometry']],
+            'radar_topics': [SCENARIO_TOPICS['radar']],
+            'detection_topics': [SCENARIO_TOPICS['detections']],
+            'object_topics': [SCENARIO_TOPICS['objects']],
+            'autoware_object_topics': [SCENARIO_TOPICS['autoware']]}
 
 
 def test_scenario_bag_deterministic_and_small(scenario, scenario_bag, tmp_path):
@@ -183,11 +184,11 @@ def test_detect_topics_by_type_and_doppler_field(tmp_path):
         w.write('/localization/kinematic_state', odometry_msg(T, 1.0, 0, 0, 0), 1.0)
     with open_bags(tmp_path / 'mixed') as bags:
         roles = bags.detect_topics()
-    assert roles['radar_clouds'] == ['/front/points', '/sensing/radar/empty']   # not the lidar
-    assert roles['odometry'] == ['/localization/kinematic_state', '/vehicle/odom']
+    assert roles['radar_topics'] == ['/front/points', '/sensing/radar/empty']   # not the lidar
+    assert roles['odometry_topic'] == ['/localization/kinematic_state', '/vehicle/odom']
     roles = detect_topics([TopicInfo('/sensing/radar/front', 'sensor_msgs/msg/PointCloud2', 3),
                            TopicInfo('/x', 'radar_msgs/msg/RadarScan', 1)])
-    assert roles == {'radar_clouds': ['/sensing/radar/front'], 'radar_scans': ['/x']}
+    assert roles == {'radar_topics': ['/sensing/radar/front'], 'radar_scan_topics': ['/x']}
 
 
 def test_three_object_families_through_a_bag(tmp_path):

@@ -47,7 +47,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``simulate`` subcommand."""
     p = subparsers.add_parser('simulate', help='simulate one intersection (paper Table I)',
                               description=__doc__)
-    p.add_argument('--seed', type=int, default=0, help='scenario seed (deterministic)')
+    from ..cli import int_at_least
+    p.add_argument('--seed', type=int_at_least(0), default=0, help='scenario seed (deterministic)')
     p.add_argument('--out', required=True, help='output folder (gt.json, bag/)')
     p.add_argument('--mode', nargs='+', choices=MODES, default=None,
                    help='detection streams to record in the bag (default: all)')
