@@ -123,3 +123,23 @@ def apply_edit(scenario, edit: str, rng: np.random.Generator):
         raise ValueError(f"edit: unknown '{edit}' ({' | '.join(EDITS)})")
     lls = copy.deepcopy(scenario.gt_lanelets)
     return _EDIT[edit](lls, rng, scenario.gt, scenario.traffic)
+
+
+def drive_variant(scenario, drive: int, share: float = 1.0):
+    """Another drive through the same intersection: a ``share`` of its vehicles (drawn with
+    a generator seeded by ``(scenario seed, drive)``) seen by a sensor with its own noise.
+
+    Geometry, ego and the traffic's routes stay the scenario's (the world); which vehicles
+    pass while this drive records, and the noise on them, change. ``share=1`` and
+    ``drive=0`` is the scenario itself.
+    """
+    from dataclasses import replace
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f'share must be in (0, 1] (got {share})')
+    if drive == 0 and share == 1.0:
+        return scenario
+    rng = np.random.default_rng([int(scenario.seed), int(drive)])
+    n = len(scenario.tracks)
+    keep = np.sort(rng.choice(n, size=max(1, int(round(share * n))), replace=False))
+    return replace(scenario, tracks=[scenario.tracks[i] for i in keep],
+                   seed=int(scenario.seed) * 1000 + int(drive), _cache={})
