@@ -47,3 +47,20 @@ def test_bag_identity_is_content(fleet_data, tmp_path):
     copy = shutil.copytree(bags[1], tmp_path / 'elsewhere')
     assert bag_identity(copy) == bag_identity(bags[1]) != bag_identity(bags[2])
     assert 0 <= seed_of(bag_identity(copy)) < 2 ** 31 - 1
+
+
+def test_replay_node_and_cli_never_import_ray():
+    import subprocess
+    import sys
+    code = ('import sys, intersection_estimator.replay, intersection_estimator.cli as c, '
+            'intersection_estimator.fleet.cli, intersection_estimator.fleet.engine; c.build_parser(); '
+            'import intersection_estimator.node; print("ray" in sys.modules, "rclpy" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[2])
+    assert out.stdout.split() == ['False', 'True'], out.stderr
+    core = ('import sys, intersection_estimator.fleet.changes, intersection_estimator.fleet.fuse, '
+            'intersection_estimator.fleet.report, intersection_estimator.fleet.prior_map; '
+            'print("rclpy" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', core], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[2])
+    assert out.stdout.split() == ['False'], out.stderr
