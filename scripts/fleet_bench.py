@@ -37,6 +37,18 @@ from intersection_estimator.pipeline import estimate
 from intersection_estimator.sim import simulate_scenario
 
 FAST = {'timer_period': 1.0, 'topology_samples': 1500, 'lane_samples': 3000}
+CACHE: Path | None = None     # --cache: estimates kept between runs (they do not depend on the map)
+
+
+def _estimate(sc, seed: int):
+    import pickle
+    f = None if CACHE is None else CACHE / f'{sc.seed}_{len(sc.tracks)}_{seed}.pkl'
+    if f is not None and f.exists():
+        return pickle.loads(f.read_bytes())
+    r = estimate(sc.detections('tracked'), seed=seed)
+    if f is not None:
+        f.write_bytes(pickle.dumps(r))
+    return r
 
 
 def _prior(lls, tmp: Path):
@@ -73,7 +85,7 @@ def _hit(edit, what, f, X, sc) -> bool:
 
 def _case_rows(seed: int, tmp: Path) -> list[dict]:
     sc = simulate_scenario(seed)
-    r = estimate(sc.detections('tracked'), seed=seed)
+    r = _estimate(sc, seed)
     if r.intersection is None:
         return [{'seed': seed, 'edit': e, 'applicable': True, 'hit': False, 'false': False} for e in ('none',) + EDITS]
     rows = []
@@ -113,7 +125,7 @@ def _fusion_case(seed: int, edit: str, drives: int, share: float, tmp: Path):
     X, X0 = _prior(lls, tmp), _prior(sc.gt_lanelets, tmp)
     views, views0 = [], []
     for d in range(1, drives + 1):
-        r = estimate(drive_variant(sc, d, share).detections('tracked'), seed=seed * 100 + d)
+        r = _estimate(drive_variant(sc, d, share), seed * 100 + d)
         if r.intersection is not None:
             views.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X)))
             views0.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X0)))
@@ -183,7 +195,12 @@ def main() -> int:
     ap.add_argument('--share', type=float, default=0.3, help='share of the vehicles one short drive sees')
     ap.add_argument('--bags', type=int, default=0, help='bags for the local-vs-Ray speed-up (0 = skip)')
     ap.add_argument('--json', default=None, help='write all figures here')
+    ap.add_argument('--cache', default=None, help='keep estimates here between runs (map-independent)')
     args = ap.parse_args()
+    global CACHE
+    if args.cache:
+        CACHE = Path(args.cache)
+        CACHE.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix='fleet_bench_'))
     out: dict = {'n': args.n, 'fusion_n': args.fusion_n, 'share': args.share}
     try:

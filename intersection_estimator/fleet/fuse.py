@@ -1,11 +1,13 @@
 """Several drives' views of one mapped intersection -> its changes (issue 17, "fused").
 
 Each drive is an independent vote on every change any drive showed (keyed by
-:attr:`Finding.key`). A drive showing the change adds ``logit(p)`` with ``p`` its finding's
-confidence; a drive that saw the element without the change subtracts ``logit(q)`` with
+:attr:`Finding.key`). A drive showing the change adds its log likelihood ratio
+(``logit(p)`` with ``p`` its finding's confidence; for absences the passages it saw, also
+the drives' ``weak`` findings below 0.5, so that absence evidence adds up; the kind's prior
+log odds are added once); a drive that saw the element without the change subtracts ``logit(q)`` with
 ``q`` = :meth:`DriveView.contradiction` (how well it saw it; <= 0.5 counts nothing, e.g. a
 drive that simply took no vehicle through a new turn does not speak against it). The sum
-is the log odds of the change (naive Bayes over independent passes, prior odds 1), so
+is the log odds of the change (naive Bayes over independent passes), so
 evidence adds up and confidence grows with every independent drive that shows it.
 A change is reported when its fused confidence is >= ``min_confidence``.
 
@@ -18,11 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 
-from .changes import ChangeConfig, DriveView, Finding
+from .changes import ChangeConfig, DriveView, Finding, _logit
 
 __all__ = ['FusedChange', 'FusedIntersection', 'fuse']
-
-P_MAX = 0.999        # no single drive is certain
 
 
 @dataclass
@@ -46,20 +46,15 @@ class FusedIntersection:
     passages: float = 0.0
 
 
-def _logit(p: float) -> float:
-    p = min(max(p, 0.5), P_MAX)
-    return math.log(p / (1.0 - p))
-
-
 def _fuse_key(key: str, views: list[tuple[str, DriveView]]) -> FusedChange:
-    L, sup, con, unobs, passages = 0.0, [], [], [], 0.0
     first = _any(views, key)          # kind, arm, direction: the same in every drive (in the key)
+    L, sup, con, unobs, passages = first.prior, [], [], [], 0.0
     lanes: set = set()
     extra: dict = {}
     for drive, v in views:
-        f = next((f for f in v.findings if f.key == key), None)
+        f = next((f for f in v.findings + v.weak if f.key == key), None)
         if f is not None:
-            L += _logit(f.confidence)
+            L += f.log_lr
             sup.append(drive)
             passages += float(f.evidence.get('passages', 0.0))
             lanes.update(f.map_lanes)
@@ -76,12 +71,12 @@ def _fuse_key(key: str, views: list[tuple[str, DriveView]]) -> FusedChange:
     if 'angle_deg' in first.evidence:      # where an added arm points (first drive showing it)
         ev['angle_deg'] = float(first.evidence['angle_deg'])
     ev['showing'] = sup
-    return FusedChange(first.kind, key, 1.0 / (1.0 + math.exp(-L)), first.map_arm, first.direction,
+    return FusedChange(first.kind, key, 1.0 / (1.0 + math.exp(-min(max(L, -50.0), 50.0))), first.map_arm, first.direction,
                        sorted(lanes), ev)
 
 
 def _any(views, key) -> Finding:
-    return next(f for _, v in views for f in v.findings if f.key == key)
+    return next(f for _, v in views for f in v.findings + v.weak if f.key == key)
 
 
 def fuse(views: list[tuple[str, DriveView]], cfg: ChangeConfig = ChangeConfig()) -> dict[str, FusedIntersection]:
@@ -92,7 +87,7 @@ def fuse(views: list[tuple[str, DriveView]], cfg: ChangeConfig = ChangeConfig())
     out = {}
     for ident, vs in sorted(by.items()):
         # within a drive, its several views of one intersection (passes) count as one drive each
-        keys = sorted({f.key for _, v in vs for f in v.findings})
+        keys = sorted({f.key for _, v in vs for f in v.findings + v.weak})
         fused = [_fuse_key(k, vs) for k in keys]
         unobs = sorted(set.intersection(*(set(v.unobserved) for _, v in vs)))
         out[ident] = FusedIntersection(

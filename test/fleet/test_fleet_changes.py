@@ -59,27 +59,33 @@ def _drop_arm(r, e):
     return I, lls
 
 
-def test_unused_arm_is_unobserved_or_weakly_removed(tmp_path, cases):
+def test_unused_arm_is_unobserved_or_removed_by_passages(tmp_path, cases):
+    """A mapped arm without traffic: 'unobserved' unless the passages that missed it outweigh
+    the prior; the evidence is the (1 - 1/arms)^passages absence likelihood."""
     sc, r = cases[5]
     X = _prior(tmp_path, sc.gt_lanelets)
     I, lls = _drop_arm(r, 1)
-    few = compare(I, lls, X, ChangeConfig(removal_passages=1000.0))
+    few = compare(I, lls, X, ChangeConfig(absence_prior=1e-12))
     assert few.findings == [] and few.unobserved == [1]
-    many = compare(I, lls, X, ChangeConfig(removal_passages=5.0))
-    assert [f.kind for f in many.findings] == ['arm_removed'] and many.unobserved == []
-    strong = max(a.confidence for a in r.intersection.arms)
-    assert many.findings[0].confidence <= 0.75 < strong       # weaker than a positive finding
+    assert 'arm_removed' in [f.kind for f in few.weak]
+    many = compare(I, lls, X)
+    (f,) = many.findings
+    assert f.kind == 'arm_removed' and many.unobserved == []
+    assert f.log_lr == pytest.approx(-many.passages * np.log(1 - 1 / 3))
+    assert f.evidence['passages'] == pytest.approx(many.passages)
 
 
 def test_connector_unused_only_for_undriven_turns(tmp_path, cases):
     sc, r = cases[5]
     X = _prior(tmp_path, sc.gt_lanelets)
-    assert compare(r.intersection, r.lanelets, X).findings == []    # default: too few passages
-    view = compare(r.intersection, r.lanelets, X, ChangeConfig(unused_passages=0.1))
+    assert compare(r.intersection, r.lanelets, X).findings == []    # default prior: too few passages
+    view = compare(r.intersection, r.lanelets, X, ChangeConfig(absence_prior=0.9))
     unused = sorted(next(c.name for c in X.connectors if c.id == f.map_lanes[0]) for f in view.findings)
     assert {f.kind for f in view.findings} == {'connector_unused'}
-    assert unused == sorted(k for k, v in sc.traffic.items() if k.startswith('c_') and v == 0)
-    assert all(f.confidence <= 0.75 for f in view.findings)
+    undriven = {k for k, v in sc.traffic.items() if k.startswith('c_') and v == 0}
+    assert unused and set(unused) <= undriven
+    for f in view.findings:      # its entering lane was left by >= 1 other, driven turn
+        assert f.evidence['passages'] >= 1
 
 
 def test_bad_config_named():
@@ -87,3 +93,5 @@ def test_bad_config_named():
         replace(ChangeConfig(), moved_m=0).validate()
     with pytest.raises(ValueError, match='min_confidence'):
         ChangeConfig(min_confidence=1.5).validate()
+    with pytest.raises(ValueError, match='absence_prior'):
+        ChangeConfig(absence_prior=0.0).validate()

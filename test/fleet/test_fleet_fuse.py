@@ -50,6 +50,21 @@ def test_weak_arm_observation_does_not_count_against():
     assert fuse(views)['X1'].changes[0].confidence == pytest.approx(0.9)
 
 
+def test_weak_absences_add_up_over_drives():
+    cfg = ChangeConfig()
+    from intersection_estimator.fleet.changes import _absence
+    gone = _absence('lane_removed', 'lane_removed:0in', 1.5, 0.5, cfg, map_arm=0, direction='in',
+                    map_lanes=['9'])
+    assert gone.confidence < 0.5                        # one short drive: not enough
+    v = _view()
+    v.counts_ok.discard((0, 'in'))
+    v.weak = [gone]
+    assert fuse([('a', v)])['X1'].changes == []
+    X = fuse([(d, v) for d in 'abc'])['X1']             # three such drives: 3 x 1.5 passages
+    (c,) = X.changes
+    assert c.kind == 'lane_removed' and c.evidence['passages'] == 4.5 and c.confidence > 0.5
+
+
 def test_order_independent_bitwise():
     views = [(f'd{i}', _view([_moved(0.6 + 0.037 * i, 0.8 + 0.01 * i)] if i % 3 else [])) for i in range(7)]
     ref = None
