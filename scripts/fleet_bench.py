@@ -87,11 +87,13 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
     sc = simulate_scenario(seed)
     r = _estimate(sc, seed)
     if r.intersection is None:
-        return [{'seed': seed, 'edit': e, 'applicable': True, 'hit': False, 'false': False} for e in ('none',) + EDITS]
+        return [{'seed': seed, 'edit': e, 'applicable': True, 'hit': False, 'false': False, 'false_incl_unused': False}
+            for e in ('none',) + EDITS]
     rows = []
     view = compare(r.intersection, r.lanelets, _prior(sc.gt_lanelets, tmp))
     rows.append({'seed': seed, 'edit': 'none', 'applicable': True, 'hit': not view.findings,
-                 'false': bool(view.findings), 'claimed': [f.key for f in view.findings]})
+                 'false': any(f.kind != 'connector_unused' for f in view.findings),
+                 'false_incl_unused': bool(view.findings), 'claimed': [f.key for f in view.findings]})
     for edit in EDITS:
         lls, what = apply_edit(sc, edit, np.random.default_rng(seed))
         if lls is None:
@@ -100,8 +102,10 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
         X = _prior(lls, tmp)
         fs = compare(r.intersection, r.lanelets, X).findings
         hits = [f for f in fs if _hit(edit, what, f, X, sc)]
+        others = [f for f in fs if f not in hits[:1]]
         rows.append({'seed': seed, 'edit': edit, 'applicable': True, 'hit': bool(hits),
-                     'false': len(fs) > len(hits[:1]), 'claimed': [f.key for f in fs]})
+                     'false': any(f.kind != 'connector_unused' for f in others),
+                     'false_incl_unused': bool(others), 'claimed': [f.key for f in fs]})
     return rows
 
 
@@ -113,7 +117,8 @@ def _kind_table(rows: list[dict]) -> list[dict]:
         out.append({'edit': edit, 'expected': EXPECTED.get(edit, '(no change)'), 'cases': n,
                     'not_applicable': sum(1 for r in rows if r['edit'] == edit and not r['applicable']),
                     'recall': sum(r['hit'] for r in rs) / max(n, 1),
-                    'false_rate': sum(r['false'] for r in rs) / max(n, 1)})
+                    'false_rate': sum(r['false'] for r in rs) / max(n, 1),
+                    'false_rate_incl_unused': sum(r['false_incl_unused'] for r in rs) / max(n, 1)})
     return out
 
 
@@ -133,7 +138,7 @@ def _fusion_case(seed: int, edit: str, drives: int, share: float, tmp: Path):
 
 
 def _fusion_table(seeds, share: float, tmp: Path) -> list[dict]:
-    res = {k: {'hit': 0, 'false': 0, 'false0': 0, 'n': 0} for k in (1, 3, 10)}
+    res = {k: {'hit': 0, 'false': 0, 'false0': 0, 'false0_strict': 0, 'n': 0} for k in (1, 3, 10)}
     for i, seed in enumerate(seeds):
         edit = EDITS[i % len(EDITS)]
         case = _fusion_case(seed, edit, 10, share, tmp)
@@ -148,11 +153,16 @@ def _fusion_table(seeds, share: float, tmp: Path) -> list[dict]:
             res[k]['n'] += 1
             res[k]['hit'] += bool(hits)
             res[k]['false'] += len(ch) > len(hits[:1])
-            res[k]['false0'] += bool(f0 is not None and f0.changes)
+            ch0 = [] if f0 is None else f0.changes
+            res[k]['false0_strict'] += bool(ch0)
+            # 'connector_unused' is the issue's weaker report (no vehicle took a mapped turn),
+            # true of the simulated traffic, which does not drive every connector
+            res[k]['false0'] += any(c.kind != 'connector_unused' for c in ch0)
         print(f'fusion case {seed} ({edit}) done', file=sys.stderr)
     return [{'drives': k, 'cases': v['n'], 'recall': v['hit'] / max(v['n'], 1),
              'false_rate_changed_map': v['false'] / max(v['n'], 1),
-             'false_rate_unchanged_map': v['false0'] / max(v['n'], 1)} for k, v in res.items()]
+             'false_rate_unchanged_map': v['false0'] / max(v['n'], 1),
+             'false_rate_unchanged_incl_unused': v['false0_strict'] / max(v['n'], 1)} for k, v in res.items()]
 
 
 def _scale(n_bags: int, tmp: Path) -> dict:
@@ -206,14 +216,15 @@ def main() -> int:
     try:
         t0 = time.perf_counter()
         rows = [r for s in range(args.n) for r in _case_rows(s, tmp)]
-        out['kinds'] = _kind_table(rows)
-        out['kinds_failures'] = [r for r in rows if r['applicable'] and (not r['hit'] or r['false'])]
-        print(_md(out['kinds'], ['edit', 'expected', 'cases', 'not_applicable', 'recall', 'false_rate']))
+        out['kinds'] = _kind_table(rows) if rows else []
+        out['kinds_failures'] = [r for r in rows if r['applicable'] and (not r['hit'] or r['false_incl_unused'])]
+        print(_md(out['kinds'], ['edit', 'expected', 'cases', 'not_applicable', 'recall', 'false_rate',
+                                 'false_rate_incl_unused']))
         print(f'({time.perf_counter() - t0:.0f} s)')
         if args.fusion_n:
             out['fusion'] = _fusion_table(range(1000, 1000 + args.fusion_n), args.share, tmp)
             print(_md(out['fusion'], ['drives', 'cases', 'recall', 'false_rate_changed_map',
-                                      'false_rate_unchanged_map']))
+                                      'false_rate_unchanged_map', 'false_rate_unchanged_incl_unused']))
         if args.bags:
             out['scale'] = _scale(args.bags, tmp / 'scale')
             print(json.dumps(out['scale'], indent=1))

@@ -105,16 +105,23 @@ class DriveView:
     weak: list = field(default_factory=list)   # absences below 0.5 in this drive (for fusion)
 
     def contradiction(self, f: Finding) -> float:
-        """How strongly this drive (not showing ``f``) speaks against ``f`` (0 = it cannot)."""
+        """How strongly this drive (not showing ``f``) speaks against ``f`` (0 = it cannot).
+
+        Against an absence (arm/lane removed, connector unused), a drive whose vehicles used
+        the element is direct evidence that it is there: ``P_MAX``.
+        """
         if f.kind == 'arm_added':
             return self.total_conf
+        ok = (f.map_arm, f.direction) in self.counts_ok       # the drive saw the mapped lanes
+        seen = self.arm_conf.get(f.map_arm, 0.0)
         if f.kind == 'arm_removed':
-            return self.arm_conf.get(f.map_arm, 0.0)
-        if f.kind in ('lane_moved', 'lane_added', 'lane_removed'):   # only a drive with the mapped count
-            ok = (f.map_arm, f.direction) in self.counts_ok
-            return self.arm_conf.get(f.map_arm, 0.0) if ok else 0.0
+            return P_MAX if seen > 0.5 else 0.0
+        if f.kind == 'lane_removed':
+            return P_MAX if ok and seen > 0.5 else 0.0
+        if f.kind in ('lane_moved', 'lane_added'):             # only a drive with the mapped count
+            return seen if ok else 0.0
         if f.kind == 'connector_unused':
-            return self.arm_conf.get(f.map_arm, 0.0) if f.map_lanes[0] in self.used else 0.0
+            return P_MAX if f.map_lanes[0] in self.used else 0.0
         return 0.0          # connector_added: a turn nobody took in this drive still exists
 
 
