@@ -177,15 +177,16 @@ def _scale(n_bags: int, tmp: Path) -> dict:
     params = tmp / 'params.yaml'
     params.write_text('intersection_estimator:\n  ros__parameters:\n'
                       + ''.join(f'    {k}: {v}\n' for k, v in FAST.items()))
-    wall = {}
+    wall, ok = {}, {}
     for engine, workers in (('local', 1), ('ray', 2)):
         t0 = time.perf_counter()
-        run_fleet([str(bags)], tmp / 'map.osm', tmp / engine, engine=engine, workers=workers,
-                  params_file=str(params), progress=False)
+        doc = run_fleet([str(bags)], tmp / 'map.osm', tmp / engine, engine=engine, workers=workers,
+                        params_file=str(params), progress=False)
         wall[engine] = time.perf_counter() - t0
+        ok[engine] = sum(b['status'] == 'ok' for b in doc['bags'])
     same = (tmp / 'local' / 'changes.json').read_bytes() == (tmp / 'ray' / 'changes.json').read_bytes()
     per_bag = wall['local'] / n_bags
-    return {'bags': n_bags, 'local_workers1_s': wall['local'], 'ray_workers2_s': wall['ray'],
+    return {'bags': n_bags, 'ok_bags': ok, 'local_workers1_s': wall['local'], 'ray_workers2_s': wall['ray'],
             'speedup': wall['local'] / wall['ray'], 'identical_changes_json': same,
             # Ray's cost beyond a perfect 2-way split of the local per-bag time
             'ray_overhead_per_bag_s': (wall['ray'] - wall['local'] / 2) / n_bags, 'local_per_bag_s': per_bag}
