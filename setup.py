@@ -18,6 +18,8 @@ setup(
         ('share/' + package_name + '/bags', glob('bags/*.json') + glob('bags/*.md')),
     ] + [('share/' + package_name + '/' + d, glob(d + '/*')) for d in sorted(glob('bags/*/'))],
     install_requires=['setuptools'],
+    # map-change detection on a Ray cluster (intersection-estimator fleet --engine ray)
+    extras_require={'fleet': ['ray==2.60.0']},
     zip_safe=False,
     maintainer='intersection_estimator developers',
     maintainer_email='dev@intersection-estimator.invalid',

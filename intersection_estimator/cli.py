@@ -20,6 +20,7 @@ SUBCOMMANDS = (
     'intersection_estimator.evaluate',     # evaluate
     'intersection_estimator.bench',        # bench
     'intersection_estimator.soak',         # soak
+    'intersection_estimator.fleet.cli',    # fleet
 )
 
 

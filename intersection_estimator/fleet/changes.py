@@ -1,0 +1,274 @@
+"""What one drive's estimate shows against one mapped intersection (issue 17, "Changes").
+
+Change kinds say how the *world* differs from the map:
+
+========================  =====================================================================
+``arm_added``             an estimated arm no mapped arm matches (by angle, :mod:`.match`)
+``arm_removed``           a mapped arm no estimated arm matches although enough passages crossed
+                          the intersection to show it (absence, below); else the arm is only
+                          *unobserved* and nothing is claimed
+``lane_added/_removed``   a matched arm has more / fewer lanes in one direction than mapped
+                          (removed: an absence, below)
+``lane_moved``            same lane count, but a lane's estimated center line lies more than
+                          ``moved_m`` (0.75 m) from the mapped one on average
+``connector_added``       a turn driven (an estimated connector, paper §III: connectors are
+                          created only from trajectories) that the map lacks
+``connector_unused``      a mapped connector no vehicle took although enough passages went
+                          through its entering lane (an absence; "unused", not "removed")
+========================  =====================================================================
+
+Evidence is the vehicle passages each estimated arm explains: the topology estimator
+reports an arm's confidence as ``1 - exp(-passages / 3)`` (:mod:`intersection_estimator.topology`),
+so ``passages = -3 ln(1 - confidence)``. A positive finding's confidence is that posterior
+confidence of the arm(s) it rests on (log likelihood ratio ``logit(confidence)``, prior odds 1).
+
+*Absences* (arm removed, lane removed, connector unused) rest on traffic that did not
+happen: if the element still existed and took a share ``f`` of the ``P`` passages that could
+have used it, all of them missing it has probability ``(1 - f)^P``, so the log likelihood
+ratio "gone : still there" is ``-P ln(1 - f)``, added to the prior log odds
+``logit(absence_prior)`` (default 0.2: a mapped element is more likely there than not).
+A mapped connector is only judged when the drive's vehicles left its entering lane through
+another connector to a matched arm; its passages are the turns seen from that lane (a
+lower bound: one vehicle each). A drive claims an absence
+only when that posterior exceeds 0.5; below, the finding is kept as ``weak`` so that
+several drives' evidence can add up (:mod:`.fuse`), and a mapped arm without traffic is
+listed as *unobserved*.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ..evaluate import lane_distance
+from ..model import ENTERING, LEAVING
+from .match import ARM_GATE_DEG, GATE_M, match_arms
+
+__all__ = ['KINDS', 'ChangeConfig', 'Finding', 'DriveView', 'compare', 'arm_passages']
+
+KINDS = ('arm_added', 'arm_removed', 'lane_added', 'lane_removed', 'lane_moved',
+         'connector_added', 'connector_unused')
+DIRS = {ENTERING: 'in', LEAVING: 'out'}
+
+
+@dataclass(frozen=True)
+class ChangeConfig:
+    gate_m: float = GATE_M                 # estimate <-> mapped intersection [m]
+    arm_gate_deg: float = ARM_GATE_DEG     # arm <-> mapped arm [deg]
+    moved_m: float = 0.75                  # lane moved beyond this mean offset [m]
+    absence_prior: float = 0.2             # prior probability that an element without traffic is gone
+    min_confidence: float = 0.5            # fused confidence to report a change
+
+    def validate(self) -> None:
+        for name in ('gate_m', 'arm_gate_deg', 'moved_m'):
+            if not getattr(self, name) > 0:
+                raise ValueError(f'{name} must be > 0 (got {getattr(self, name)})')
+        for name in ('min_confidence', 'absence_prior'):
+            if not 0.0 < getattr(self, name) < 1.0:
+                raise ValueError(f'{name} must be in (0, 1) (got {getattr(self, name)})')
+
+
+@dataclass
+class Finding:
+    """One change one drive shows; ``key`` identifies it across drives."""
+
+    kind: str
+    key: str
+    confidence: float
+    map_arm: int = -1
+    direction: str = ''
+    map_lanes: list = field(default_factory=list)
+    evidence: dict = field(default_factory=dict)
+    log_lr: float = float('nan')     # log likelihood ratio of this drive (nan: logit(confidence))
+    prior: float = 0.0               # prior log odds of the kind (absences: logit(absence_prior))
+
+    def __post_init__(self):
+        if math.isnan(self.log_lr):
+            self.log_lr = _logit(self.confidence)
+
+
+@dataclass
+class DriveView:
+    """One drive against one mapped intersection: findings and what the drive saw."""
+
+    intersection: str
+    findings: list[Finding]
+    arm_conf: dict[int, float]      # mapped arm -> confidence of the estimated arm matched to it
+    counts_ok: set                  # (mapped arm, 'in'|'out') with the mapped lane count
+    used: set                       # mapped connector ids the drive's traffic took
+    total_conf: float               # confidence that the drive saw the intersection at all
+    passages: float
+    unobserved: list[int]           # mapped arms without traffic (nothing claimed)
+    weak: list = field(default_factory=list)   # absences below 0.5 in this drive (for fusion)
+
+    def contradiction(self, f: Finding) -> float:
+        """How strongly this drive (not showing ``f``) speaks against ``f`` (0 = it cannot).
+
+        Against an absence (arm/lane removed, connector unused), a drive whose vehicles used
+        the element is direct evidence that it is there: ``P_MAX``.
+        """
+        if f.kind == 'arm_added':
+            return self.total_conf
+        ok = (f.map_arm, f.direction) in self.counts_ok       # the drive saw the mapped lanes
+        seen = self.arm_conf.get(f.map_arm, 0.0)
+        if f.kind == 'arm_removed':
+            return P_MAX if seen > 0.5 else 0.0
+        if f.kind == 'lane_removed':
+            return P_MAX if ok and seen > 0.5 else 0.0
+        if f.kind in ('lane_moved', 'lane_added'):             # only a drive with the mapped count
+            return seen if ok else 0.0
+        if f.kind == 'connector_unused':
+            return P_MAX if f.map_lanes[0] in self.used else 0.0
+        return 0.0          # connector_added: a turn nobody took in this drive still exists
+
+
+def arm_passages(confidence: float) -> float:
+    """Vehicle passages behind an arm's confidence ``1 - exp(-p / 3)`` (topology.best)."""
+    return -3.0 * math.log1p(-min(float(confidence), 1.0 - 1e-12))
+
+
+P_MAX = 0.999        # no single drive is certain
+
+
+def _logit(p: float) -> float:
+    p = min(max(p, 0.5), P_MAX)
+    return math.log(p / (1.0 - p))
+
+
+def _absence(kind, key, passages, share, cfg, **kw) -> Finding:
+    """An absence finding: ``P`` passages that all missed an element taking ``share`` of them."""
+    llr = -passages * math.log1p(-min(share, 1.0 - 1e-9))
+    prior = math.log(cfg.absence_prior / (1.0 - cfg.absence_prior))
+    conf = 1.0 / (1.0 + math.exp(-min(max(llr + prior, -50.0), 50.0)))
+    ev = {'passages': passages, 'share': share, **kw.pop('evidence', {})}
+    return Finding(kind, key, conf, evidence=ev, log_lr=llr, prior=prior, **kw)
+
+
+def _est_lanes(lanelets) -> tuple[dict, dict]:
+    """(arm, direction) -> estimated lanelets by lane index; id -> lanelet."""
+    by = {}
+    for l in lanelets:
+        if l.kind in ('entering', 'leaving'):
+            d = ENTERING if l.kind == 'entering' else LEAVING
+            by.setdefault((l.arm, d), []).append(l)
+    return {k: sorted(v, key=lambda l: l.lane_index) for k, v in by.items()}, {l.id: l for l in lanelets}
+
+
+def _sector(angle: float, mapped) -> int:
+    """The mapped arm an unmatched estimated arm follows counter-clockwise (key of arm_added)."""
+    ang = np.array([a.angle for a in mapped.arms])
+    if not len(ang):
+        return -1
+    return int(np.argmin((angle - ang) % (2 * math.pi)))
+
+
+def _arm_findings(est, mapped, amap, conf, pas, cfg) -> list:
+    out = []
+    total = float(sum(pas))
+    for e, arm in enumerate(est.arms):
+        if e not in amap:
+            s = _sector(arm.angle, mapped)
+            out.append(Finding('arm_added', f'arm_added:after{s}', conf[e], map_arm=s,
+                               evidence={'passages': pas[e], 'angle_deg': math.degrees(arm.angle)}))
+    matched = set(amap.values())
+    for m in range(len(mapped.arms)):
+        if m in matched:
+            continue
+        # every arm passage could have been one through this arm (share 1 / arms)
+        lanes = [l.id for l in mapped.arms[m].lanes_in + mapped.arms[m].lanes_out]
+        out.append(_absence('arm_removed', f'arm_removed:{m}', total, 1.0 / len(mapped.arms), cfg,
+                            map_arm=m, map_lanes=lanes))
+    return out
+
+
+def _pair_lanes(est_l, map_l) -> dict[int, int]:
+    """Estimated lane -> mapped lane by center-line distance (Hungarian)."""
+    if not est_l or not map_l:
+        return {}
+    cost = np.array([[lane_distance(e.center, m.center) for m in map_l] for e in est_l])
+    cost[~np.isfinite(cost)] = 1e6
+    r, c = linear_sum_assignment(cost)
+    return {int(i): int(j) for i, j in zip(r, c)}
+
+
+def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok) -> list:
+    out = []
+    arm, marm = est.arms[e], mapped.arms[m]
+    for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
+        ml, el, ds = marm.lanes(d), lanes.get((e, d), []), DIRS[d]
+        ev = {'passages': pas[e], 'lanes_estimated': int(n_est), 'lanes_mapped': len(ml)}
+        if n_est > len(ml):
+            out.append(Finding('lane_added', f'lane_added:{m}{ds}', conf[e], m, ds, [], ev))
+        elif n_est < len(ml):
+            pair = _pair_lanes(el, ml)
+            gone = [ml[j].id for j in range(len(ml)) if j not in pair.values()] if pair else [l.id for l in ml[n_est:]]
+            # the arm's passages in this direction (by mapped lanes) all missed the missing lanes
+            p_dir = pas[e] * len(ml) / max(len(marm.lanes_in) + len(marm.lanes_out), 1)
+            out.append(_absence('lane_removed', f'lane_removed:{m}{ds}', p_dir, (len(ml) - n_est) / len(ml),
+                                cfg, map_arm=m, direction=ds, map_lanes=gone, evidence=ev))
+        else:
+            counts_ok.add((m, ds))
+            for k, (el_k, ml_k) in enumerate(zip(el, ml)):
+                dist = lane_distance(el_k.center, ml_k.center)
+                if math.isfinite(dist) and dist > cfg.moved_m:
+                    out.append(Finding('lane_moved', f'lane_moved:{ml_k.id}', conf[e], m, ds, [ml_k.id],
+                                       {'passages': pas[e], 'offset_m': dist, 'lane_index': k}))
+    return out
+
+
+def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_ok, used) -> list:
+    out, keys = [], {c.key: c for c in mapped.connectors}
+    seen = set()
+    for l in lanes_by_id.values():
+        if l.kind != 'connector' or l.arm not in amap or l.arm_to not in amap or not l.successors:
+            continue
+        a, b = amap[l.arm], amap[l.arm_to]
+        nxt = lanes_by_id.get(l.successors[0])
+        if nxt is None or (a, 'in') not in counts_ok or (b, 'out') not in counts_ok:
+            continue
+        key = (a, l.lane_index, b, nxt.lane_index)
+        seen.add(key)
+        if key in keys:
+            used.add(keys[key].id)
+        else:
+            c = min(conf[l.arm], conf[l.arm_to])
+            out.append(Finding('connector_added', 'connector_added:%d.%d-%d.%d' % key, c, a, 'in',
+                               [mapped.arms[a].lanes_in[key[1]].id, mapped.arms[b].lanes_out[key[3]].id],
+                               {'passages': min(pas[l.arm], pas[l.arm_to]), 'turn': list(key)}))
+    n_next: dict = {}
+    for c in mapped.connectors:
+        n_next[c.lane_in] = n_next.get(c.lane_in, 0) + 1
+    left_by = {(k[0], k[1]) for k in seen}       # entering lanes the drive's vehicles left by a known turn
+    for key, c in sorted(keys.items()):
+        a, b = key[0], key[2]
+        if key in seen or (a, 'in') not in counts_ok or (b, 'out') not in counts_ok or (a, key[1]) not in left_by:
+            continue
+        # passages known to have gone through the entering lane: one per turn seen from it
+        # (a lower bound: the estimate does not say how many vehicles took each turn)
+        lane_pas = float(sum(1 for k in seen if k[:2] == key[:2]))
+        out.append(_absence('connector_unused', f'connector_unused:{c.id}', lane_pas, 1.0 / n_next[c.lane_in],
+                            cfg, map_arm=a, direction='in', map_lanes=[c.id, c.lane_in]))
+    return out
+
+
+def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveView:
+    """Findings of one estimate (``model.Intersection`` + lanelets) against ``mapped``."""
+    conf = [float(a.confidence) for a in est.arms]
+    pas = [arm_passages(c) for c in conf]
+    amap = match_arms([a.angle for a in est.arms], [a.angle for a in mapped.arms], cfg.arm_gate_deg)
+    findings = _arm_findings(est, mapped, amap, conf, pas, cfg)
+    lanes, by_id = _est_lanes(lanelets)
+    counts_ok, used = set(), set()
+    for e, m in sorted(amap.items()):
+        findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok)
+    findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used)
+    total = float(sum(pas))
+    weak = sorted((f for f in findings if f.confidence < 0.5), key=lambda f: f.key)
+    return DriveView(intersection=mapped.id, findings=sorted((f for f in findings if f.confidence >= 0.5),
+                                                             key=lambda f: f.key), weak=weak,
+                     unobserved=sorted(f.map_arm for f in weak if f.kind == 'arm_removed'),
+                     arm_conf={m: conf[e] for e, m in amap.items()}, counts_ok=counts_ok, used=used,
+                     total_conf=1.0 - math.exp(-total / 3.0), passages=total)

@@ -1,0 +1,145 @@
+"""Prior maps with one change applied to a simulated case's ground truth (tests, benchmark).
+
+Each edit changes the *map*; the world (the simulated traffic) stays the ground truth, so
+the change a detector should report is the opposite one (:data:`EXPECTED`): a map that lost
+an arm must give ``arm_added``, a map with an extra lane ``lane_removed``, and so on.
+Edits pick their target with a seeded ``numpy.random.Generator`` among the elements the
+edit applies to; ``None`` when the case has none (e.g. ``lane_added`` needs no extra
+condition, ``lane_removed`` an arm direction with >= 2 lanes).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+__all__ = ['EDITS', 'EXPECTED', 'apply_edit']
+
+EDITS = ('arm_removed', 'lane_added', 'lane_removed', 'lane_moved', 'connector_removed')
+#: map edit -> change kind the drives should show
+EXPECTED = {'arm_removed': 'arm_added', 'lane_added': 'lane_removed', 'lane_removed': 'lane_added',
+            'lane_moved': 'lane_moved', 'connector_removed': 'connector_added'}
+
+
+def _lanes(lanelets, kind):
+    return [l for l in lanelets if l.kind == kind]
+
+
+def _outermost(lanelets, rng):
+    """(arm, kind, outermost lane) of a random arm direction."""
+    groups: dict = {}
+    for l in lanelets:
+        if l.kind != 'connector':
+            groups.setdefault((l.arm, l.kind), []).append(l)
+    keys = sorted(groups)
+    a, kind = keys[int(rng.integers(len(keys)))]
+    return a, kind, max(groups[(a, kind)], key=lambda l: l.lane_index), len(groups[(a, kind)])
+
+
+def _normal(l) -> np.ndarray:
+    """Unit normal pointing from the lane's center line to its left border."""
+    n = l.left[0] - l.center[0]
+    return n / np.hypot(*n)
+
+
+def _shift(l, vec, weights=None):
+    w = np.ones(len(l.center)) if weights is None else weights
+    for name in ('left', 'right', 'center'):
+        setattr(l, name, getattr(l, name) + w[:, None] * vec)
+
+
+def _arm_removed(lls, rng, gt, traffic):
+    a = int(rng.integers(len(gt.arms)))
+    return [l for l in lls if l.arm != a and l.arm_to != a], {'arm': a}
+
+
+def _lane_added(lls, rng, gt, traffic):
+    a, kind, outer, _ = _outermost(lls, rng)
+    new = copy.deepcopy(outer)
+    w = float(np.hypot(*(outer.left[0] - outer.right[0])))
+    # away from the median = to the right of the driving direction in right-hand traffic
+    n = -_normal(outer) * gt.traffic_side
+    _shift(new, n * w)
+    new.id, new.lane_index, new.successors = f'{outer.id}_extra', outer.lane_index + 1, []
+    return lls + [new], {'arm': a, 'kind': kind}
+
+
+def _lane_removed(lls, rng, gt, traffic):
+    cands = [(l.arm, l.kind) for l in lls if l.kind != 'connector' and l.lane_index >= 1]
+    if not cands:
+        return None, None
+    a, kind = sorted(set(cands))[int(rng.integers(len(set(cands))))]
+    k = max(l.lane_index for l in lls if l.arm == a and l.kind == kind)
+    gone = next(l for l in lls if l.arm == a and l.kind == kind and l.lane_index == k)
+    out = [l for l in lls if l is not gone and gone.id not in l.successors and l.id not in gone.successors]
+    for l in out:
+        l.successors = [s for s in l.successors if s != gone.id]
+    return out, {'arm': a, 'kind': kind, 'lane': gone.id}
+
+
+def _lane_moved(lls, rng, gt, traffic):
+    lanes = [l for l in lls if l.kind != 'connector']
+    l = lanes[int(rng.integers(len(lanes)))]
+    vec = _normal(l) * (1.0 if rng.random() < 0.5 else -1.0)
+    _shift(l, vec)
+    # the connectors it shares end points with follow at that end (weight 1 -> 0 along them)
+    for c in _lanes(lls, 'connector'):
+        m = len(c.center)
+        if l.kind == 'entering' and c.id in l.successors:
+            _shift(c, vec, np.linspace(1.0, 0.0, m))
+        elif l.kind == 'leaving' and l.id in c.successors:
+            _shift(c, vec, np.linspace(0.0, 1.0, m))
+    return lls, {'lane': l.id}
+
+
+def _connector_removed(lls, rng, gt, traffic):
+    """A driven connector whose entering and leaving lanes keep another connector."""
+    cons = _lanes(lls, 'connector')
+    n_from = {}
+    n_to = {}
+    for c in cons:
+        src = next(l.id for l in lls if c.id in l.successors)
+        n_from[src] = n_from.get(src, 0) + 1
+        n_to[c.successors[0]] = n_to.get(c.successors[0], 0) + 1
+    ok = [c for c in cons if traffic.get(c.id, 0) > 0 and n_to[c.successors[0]] > 1
+          and n_from[next(l.id for l in lls if c.id in l.successors)] > 1]
+    if not ok:
+        return None, None
+    gone = ok[int(rng.integers(len(ok)))]
+    out = [l for l in lls if l is not gone]
+    for l in out:
+        l.successors = [s for s in l.successors if s != gone.id]
+    return out, {'connector': gone.id}
+
+
+_EDIT = {'arm_removed': _arm_removed, 'lane_added': _lane_added, 'lane_removed': _lane_removed,
+         'lane_moved': _lane_moved, 'connector_removed': _connector_removed}
+
+
+def apply_edit(scenario, edit: str, rng: np.random.Generator):
+    """``(lanelets of the edited map, what was edited)`` or ``(None, None)`` if not applicable."""
+    if edit not in _EDIT:
+        raise ValueError(f"edit: unknown '{edit}' ({' | '.join(EDITS)})")
+    lls = copy.deepcopy(scenario.gt_lanelets)
+    return _EDIT[edit](lls, rng, scenario.gt, scenario.traffic)
+
+
+def drive_variant(scenario, drive: int, share: float = 1.0):
+    """Another drive through the same intersection: a ``share`` of its vehicles (drawn with
+    a generator seeded by ``(scenario seed, drive)``) seen by a sensor with its own noise.
+
+    Geometry, ego and the traffic's routes stay the scenario's (the world); which vehicles
+    pass while this drive records, and the noise on them, change. ``share=1`` and
+    ``drive=0`` is the scenario itself.
+    """
+    from dataclasses import replace
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f'share must be in (0, 1] (got {share})')
+    if drive == 0 and share == 1.0:
+        return scenario
+    rng = np.random.default_rng([int(scenario.seed), int(drive)])
+    n = len(scenario.tracks)
+    keep = np.sort(rng.choice(n, size=max(1, int(round(share * n))), replace=False))
+    return replace(scenario, tracks=[scenario.tracks[i] for i in keep],
+                   seed=int(scenario.seed) * 1000 + int(drive), _cache={})

@@ -1,0 +1,66 @@
+"""``intersection-estimator fleet`` with the local engine: changes.json, PNG, summary table,
+a corrupt bag reported while the others go on (issue 17, slice 3)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from intersection_estimator.cli import main
+from intersection_estimator.fleet.engine import bag_identity, expand_bags, seed_of
+
+PARAMS = str(Path(__file__).with_name('fast_params.yaml'))
+
+
+def test_fleet_local_reports_change_and_corrupt_bag(fleet_data, tmp_path, capsys):
+    out = tmp_path / 'out'
+    rc = main(['fleet', str(fleet_data['bags']), '--map', str(fleet_data['map']), '--out', str(out),
+               '--params', PARAMS, '--quiet'])
+    printed = capsys.readouterr().out
+    assert rc == 2                                   # a bag failed, the rest went on
+    doc = json.loads((out / 'changes.json').read_text())
+    status = {b['bag']: b['status'] for b in doc['bags']}
+    assert status == {'broken.mcap': 'failed', 'drive1': 'ok', 'drive2': 'ok'}
+    assert 'failed: broken.mcap' in printed and 'X' in printed
+    (inter,) = doc['intersections']
+    moved = [c for c in inter['changes'] if c['kind'] == 'lane_moved']
+    assert len(moved) == 1 and moved[0]['evidence']['drives_showing'] == 2
+    assert 0.75 < moved[0]['evidence']['mean_offset_m'] < 1.3
+    assert (out / f"changes_{inter['id']}.png").stat().st_size > 10_000
+    assert str(tmp_path) not in (out / 'changes.json').read_text()     # no machine paths
+    (fleet_data['root'] / 'local_changes.json').write_bytes((out / 'changes.json').read_bytes())
+
+
+def test_bad_map_and_engine_refused(fleet_data, tmp_path, capsys):
+    assert main(['fleet', str(fleet_data['bags']), '--map', str(tmp_path / 'none.osm'),
+                 '--out', str(tmp_path)]) == 1
+    assert 'prior map' in capsys.readouterr().err
+    assert main(['fleet', str(fleet_data['bags']), '--map', str(fleet_data['map']), '--out', str(tmp_path),
+                 '--workers', '0']) == 1
+    assert 'workers' in capsys.readouterr().err
+
+
+def test_bag_identity_is_content(fleet_data, tmp_path):
+    bags = expand_bags([str(fleet_data['bags'])])
+    assert [Path(b).name for b in bags] == ['broken.mcap', 'drive1', 'drive2']
+    import shutil
+    copy = shutil.copytree(bags[1], tmp_path / 'elsewhere')
+    assert bag_identity(copy) == bag_identity(bags[1]) != bag_identity(bags[2])
+    assert 0 <= seed_of(bag_identity(copy)) < 2 ** 31 - 1
+
+
+def test_replay_node_and_cli_never_import_ray():
+    import subprocess
+    import sys
+    code = ('import sys, intersection_estimator.replay, intersection_estimator.cli as c, '
+            'intersection_estimator.fleet.cli, intersection_estimator.fleet.engine; c.build_parser(); '
+            'import intersection_estimator.node; print("ray" in sys.modules, "rclpy" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[2])
+    assert out.stdout.split() == ['False', 'True'], out.stderr
+    core = ('import sys, intersection_estimator.fleet.changes, intersection_estimator.fleet.fuse, '
+            'intersection_estimator.fleet.report, intersection_estimator.fleet.prior_map; '
+            'print("rclpy" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', core], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[2])
+    assert out.stdout.split() == ['False'], out.stderr

@@ -1,0 +1,75 @@
+"""Fusion of several drives (issue 17): evidence adds up, confidence grows with independent
+drives, contradicting drives outvote a single one, completion order does not matter."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import pytest
+
+from intersection_estimator.fleet.changes import ChangeConfig, DriveView, Finding
+from intersection_estimator.fleet.fuse import fuse
+
+
+def _view(findings=(), arm_conf=0.95, used=()):
+    return DriveView(intersection='X1', findings=list(findings), arm_conf={0: arm_conf, 1: arm_conf},
+                     counts_ok={(0, 'in'), (0, 'out'), (1, 'in'), (1, 'out')}, used=set(used),
+                     total_conf=0.99, passages=10.0, unobserved=[])
+
+
+def _moved(conf=0.9, offset=1.0):
+    return Finding('lane_moved', 'lane_moved:7', conf, 0, 'in', ['7'], {'passages': 5.0, 'offset_m': offset})
+
+
+def test_confidence_grows_with_independent_drives():
+    c = [fuse([(f'd{i}', _view([_moved()])) for i in range(n)])['X1'].changes[0] for n in (1, 3, 10)]
+    assert c[0].confidence == pytest.approx(0.9)
+    assert c[0].confidence < c[1].confidence < c[2].confidence < 1.0
+    assert [x.evidence['passages'] for x in c] == [5.0, 15.0, 50.0]
+    assert c[1].evidence['drives_showing'] == 3
+
+
+def test_single_drive_outvoted_by_drives_that_saw_the_lane():
+    views = [('a', _view([_moved(0.9)])), ('b', _view()), ('c', _view())]
+    X = fuse(views)['X1']
+    assert X.changes == [] and len(X.candidates) == 1
+    assert X.candidates[0].evidence['drives_contradicting'] == 2
+
+
+def test_a_drive_without_the_turn_does_not_contradict_it():
+    added = Finding('connector_added', 'connector_added:0.0-1.0', 0.9, 0, 'in', ['1', '2'], {'passages': 3.0})
+    X = fuse([('a', _view([added])), ('b', _view()), ('c', _view())])['X1']
+    assert [c.kind for c in X.changes] == ['connector_added']
+    assert X.changes[0].evidence['drives_not_seeing'] == 2
+    assert X.changes[0].confidence == pytest.approx(0.9)
+
+
+def test_weak_arm_observation_does_not_count_against():
+    views = [('a', _view([_moved(0.9)])), ('b', _view(arm_conf=0.3))]
+    assert fuse(views)['X1'].changes[0].confidence == pytest.approx(0.9)
+
+
+def test_weak_absences_add_up_over_drives():
+    cfg = ChangeConfig()
+    from intersection_estimator.fleet.changes import _absence
+    gone = _absence('lane_removed', 'lane_removed:0in', 1.5, 0.5, cfg, map_arm=0, direction='in',
+                    map_lanes=['9'])
+    assert gone.confidence < 0.5                        # one short drive: not enough
+    v = _view()
+    v.counts_ok.discard((0, 'in'))
+    v.weak = [gone]
+    assert fuse([('a', v)])['X1'].changes == []
+    X = fuse([(d, v) for d in 'abc'])['X1']             # three such drives: 3 x 1.5 passages
+    (c,) = X.changes
+    assert c.kind == 'lane_removed' and c.evidence['passages'] == 4.5 and c.confidence > 0.5
+
+
+def test_order_independent_bitwise():
+    views = [(f'd{i}', _view([_moved(0.6 + 0.037 * i, 0.8 + 0.01 * i)] if i % 3 else [])) for i in range(7)]
+    ref = None
+    for perm in itertools.islice(itertools.permutations(views), 0, 5040, 97):
+        X = fuse(list(perm), ChangeConfig())['X1']
+        got = json.dumps([(c.key, c.confidence, c.evidence) for c in X.changes + X.candidates])
+        ref = ref or got
+        assert got == ref
