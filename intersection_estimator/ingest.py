@@ -71,6 +71,7 @@ class Ingest:
         self.dropped = Counter()
         self._warnings: list[tuple[str, str]] = []
         self._pending: deque = deque(maxlen=PENDING_MAX)
+        self._pending_points = 0
         self.latest_stamp: float | None = None
         self._jumps, self._jump_to = 0, None       # time jump: count of consistent stamps, last one
         self._ego_jumps: list[EgoPose] = []        # ego jump candidates, consistent among themselves
@@ -119,12 +120,24 @@ class Ingest:
                 self._hold(role, msg)
                 return 0
             return self.drop(exc.reason, f'{role}: dropped a message: {exc}')
-        added = estimator.add(dets) if dets is not None and len(dets) else 0
-        if dets is not None and len(dets) > added:
-            self.dropped['non_finite'] += len(dets) - added
+        added = self._add(estimator, dets) if dets is not None and len(dets) else 0
         self.latest_stamp = stamp if self.latest_stamp is None else max(self.latest_stamp, stamp)
         if role == 'odometry_topic' and self._pending:
             added += self._retry_pending(estimator)
+        return added
+
+    def _add(self, estimator, dets) -> int:
+        """Add to the window; counts rows it refused (non-finite) and the observations that
+        gave way to the max_observations cap (a burst degrades to dropping, counted)."""
+        before = getattr(estimator, 'evicted', 0)
+        added = estimator.add(dets)
+        if len(dets) > added:
+            self.dropped['non_finite'] += len(dets) - added
+        pushed = getattr(estimator, 'evicted', 0) - before
+        if pushed:
+            self.dropped['window_full'] += pushed
+            self.warn('window_full', f'max_observations={self.values["max_observations"]} reached: '
+                      f'{pushed} older observation(s) gave way')
         return added
 
     def drop(self, reason: str, text: str) -> int:
@@ -144,10 +157,17 @@ class Ingest:
         return out
 
     def _hold(self, role, msg) -> None:
-        if len(self._pending) == self._pending.maxlen:
-            self.drop('no_ego_pose', f'{role}: no ego pose for {PENDING_MAX} held-back messages; '
-                      'dropping the oldest (is odometry published?)')
+        """Hold a message back until odometry covers its stamp: at most PENDING_MAX messages
+        and max_observations points (a burst before the first pose must not grow memory)."""
+        cap = int(self.values['max_observations'])
+        size = _points_of(msg)
+        while self._pending and (len(self._pending) == self._pending.maxlen
+                                 or self._pending_points + size > cap):
+            self._pending_points -= _points_of(self._pending.popleft()[1])
+            self.drop('no_ego_pose', f'{role}: no ego pose for {len(self._pending) + 1} held-back messages '
+                      f'({self._pending_points + size} points); dropping the oldest (is odometry published?)')
         self._pending.append((role, msg))
+        self._pending_points += size
 
     def _check_stamp(self, msg, estimator) -> float:
         """Stamp of ``msg`` in seconds; refuses non-finite ones and unconfirmed time jumps."""
@@ -171,7 +191,7 @@ class Ingest:
             self.latest_stamp, self._jumps, self._jump_to = stamp, 0, None
             self._ego_jumps.clear()
             self.ego.clear()
-            self._pending.clear()
+            self._set_pending([])
             estimator.reset()
         else:
             self._jumps, self._jump_to = 0, None
@@ -249,20 +269,23 @@ class Ingest:
 
     def _retry_pending(self, estimator) -> int:
         latest = self.ego.latest.stamp
-        pending, self._pending = list(self._pending), deque(maxlen=PENDING_MAX)
+        pending = list(self._pending)
+        self._set_pending([(r, m) for r, m in pending if self._stamp(m) > latest])
         added = 0
         for role, msg in pending:
-            stamp = self._stamp(msg)
-            if stamp > latest:
-                self._pending.append((role, msg))
+            if self._stamp(msg) > latest:
                 continue
             try:
                 dets = self._convert(role, msg)
             except AdapterError as exc:
                 self.drop(exc.reason, f'{role}: dropped a held-back message: {exc}')
                 continue
-            added += estimator.add(dets)
+            added += self._add(estimator, dets) if len(dets) else 0
         return added
+
+    def _set_pending(self, items) -> None:
+        self._pending = deque(items, maxlen=PENDING_MAX)
+        self._pending_points = sum(_points_of(m) for _, m in self._pending)
 
     # -- ego --------------------------------------------------------------------------------
     def ego_pose(self) -> tuple[float, float, float] | None:
@@ -271,7 +294,20 @@ class Ingest:
 
     def forget_before(self, t: float) -> None:
         """After a reset: drop held-back messages older than ``t``."""
-        self._pending = deque(((r, m) for r, m in self._pending if self._stamp(m) >= t), maxlen=PENDING_MAX)
+        self._set_pending([(r, m) for r, m in self._pending if self._stamp(m) >= t])
+
+
+def _points_of(msg) -> int:
+    """Rows a held-back message will become (cloud points, objects, poses, returns)."""
+    try:
+        if hasattr(msg, 'width') and hasattr(msg, 'height'):
+            return max(int(msg.width) * int(msg.height), 1)
+        for name in ('objects', 'poses', 'returns'):
+            if hasattr(msg, name):
+                return max(len(getattr(msg, name)), 1)
+    except (TypeError, ValueError, OverflowError):
+        pass
+    return 1
 
 
 def _plausible(a: EgoPose, b: EgoPose) -> bool:
