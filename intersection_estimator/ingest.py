@@ -21,8 +21,9 @@ from msg_adapters.errors import AdapterError
 from msg_adapters.odometry import EgoPose, EgoPoseBuffer, read_odometry
 
 from . import params as P
+from .tf import TfBuffer, TfMounts, compose
 
-__all__ = ['ROLE_TYPES', 'Ingest', 'RateLimitedLog']
+__all__ = ['ROLE_TYPES', 'TF_TOPICS', 'Ingest', 'RateLimitedLog']
 
 #: input role (parameter name) -> ROS message type
 ROLE_TYPES = {
@@ -33,6 +34,10 @@ ROLE_TYPES = {
     'autoware_object_topics': 'autoware_perception_msgs/msg/TrackedObjects',
     'odometry_topic': 'nav_msgs/msg/Odometry',
 }
+
+#: TF topics (tf2_msgs/msg/TFMessage) -> static?; fed to :meth:`Ingest.handle_tf`
+TF_TOPICS = {'/tf': False, '/tf_static': True}
+TF_TYPE = 'tf2_msgs/msg/TFMessage'
 
 PENDING_MAX = 256        # messages held back waiting for the ego pose
 JUMP_S = 30.0            # a stamp this far from the time base is suspicious
@@ -75,6 +80,7 @@ class Ingest:
         self.latest_stamp: float | None = None
         self._jumps, self._jump_to = 0, None       # time jump: count of consistent stamps, last one
         self._ego_jumps: list[EgoPose] = []        # ego jump candidates, consistent among themselves
+        self.tf = TfBuffer()                       # /tf, /tf_static: mounts and map -> odom
         self.configure(values)
         self.ego = EgoPoseBuffer(fixed_frame=values['fixed_frame'])
 
@@ -83,7 +89,8 @@ class Ingest:
         self.opts = AdapterOptions(doppler_field=values['doppler_field'] or None,
                                    doppler_sign=float(values['doppler_sign']),
                                    min_existence=float(values['min_existence_probability']),
-                                   mounts=P.mounts(values), max_points=int(values['max_observations']))
+                                   mounts=TfMounts(self.tf, 'base_link', P.mounts(values)),
+                                   max_points=int(values['max_observations']))
 
     # -- topics -----------------------------------------------------------------------------
     def topics(self) -> list[tuple[str, str, str]]:
@@ -140,6 +147,19 @@ class Ingest:
                       f'{pushed} older observation(s) gave way')
         return added
 
+    def handle_tf(self, msg, static: bool) -> int:
+        """A ``tf2_msgs/TFMessage`` from ``/tf`` (``static`` False) or ``/tf_static``: sensor
+        mounts and ``map -> odom`` come from it (the ``mount_*`` parameters are the fallback).
+        Returns the transforms taken."""
+        self.received['tf_static' if static else 'tf'] += 1
+        try:
+            n = self.tf.add(msg, static)
+        except Exception as exc:  # noqa: BLE001 - a malformed message is dropped, counted
+            return self.drop('malformed', f'{"/tf_static" if static else "/tf"}: dropped a message: {exc}')
+        if n == 0 and len(getattr(msg, 'transforms', ()) or ()):
+            return self.drop('malformed', f'{"/tf_static" if static else "/tf"}: no usable transform in a message')
+        return n
+
     def drop(self, reason: str, text: str) -> int:
         self.dropped[reason] += 1
         self.warn(reason, text)
@@ -191,6 +211,7 @@ class Ingest:
             self.latest_stamp, self._jumps, self._jump_to = stamp, 0, None
             self._ego_jumps.clear()
             self.ego.clear()
+            self.tf.clear()
             self._set_pending([])
             estimator.reset()
         else:
@@ -235,8 +256,7 @@ class Ingest:
         relocalisation is accepted after JUMP_CONFIRM consistent poses (the buffer restarts).
         """
         if pose.frame_id and pose.frame_id != self.ego.fixed_frame:
-            raise AdapterError('frame_mismatch', f'odometry in {pose.frame_id!r}, fixed frame is '
-                                                 f'{self.ego.fixed_frame!r}')
+            pose = self._to_fixed(pose)
         if not (abs(pose.x) <= MAX_COORD and abs(pose.y) <= MAX_COORD):
             raise AdapterError('out_of_range', f'ego pose ({pose.x:g}, {pose.y:g}) beyond {MAX_COORD:g} m')
         twist = (pose.vx, pose.vy, pose.yaw_rate)
@@ -258,6 +278,17 @@ class Ingest:
         for p in self._ego_jumps:
             self.ego.add(p)
         self._ego_jumps.clear()
+
+    def _to_fixed(self, pose: EgoPose) -> EgoPose:
+        """Odometry in another frame (REP 105: ``odom``) -> the fixed frame through TF
+        (``map -> odom`` at the pose stamp); twist stays in the child frame."""
+        fixed = self.ego.fixed_frame
+        tf = self.tf.lookup(fixed, pose.frame_id, pose.stamp)
+        if tf is None:
+            raise AdapterError('frame_mismatch', f'odometry in {pose.frame_id!r}, fixed frame is {fixed!r} '
+                               f'and /tf has no {fixed} -> {pose.frame_id} transform at {pose.stamp:.3f} s')
+        x, y, yaw = compose(tf, (pose.x, pose.y, pose.yaw))
+        return replace(pose, frame_id=fixed, x=x, y=y, yaw=yaw)
 
     def _waits_for_pose(self, msg) -> bool:
         latest = self.ego.latest
