@@ -81,6 +81,7 @@ class Ingest:
         self._jumps, self._jump_to = 0, None       # time jump: count of consistent stamps, last one
         self._ego_jumps: list[EgoPose] = []        # ego jump candidates, consistent among themselves
         self.tf = TfBuffer()                       # /tf, /tf_static: mounts and map -> odom
+        self.missing: list[str] = []               # configured topics whose type is not installed
         self.configure(values)
         self.ego = EgoPoseBuffer(fixed_frame=values['fixed_frame'])
 
@@ -101,14 +102,18 @@ class Ingest:
         return out
 
     def subscriptions(self) -> list[tuple[str, str, type]]:
-        """(role, topic, message class) for live subscriptions; skips types not installed."""
-        subs = []
+        """(role, topic, message class) for live subscriptions. A configured topic whose
+        message package is not installed is not subscribed: :attr:`missing` gets one line
+        naming the topic and the package (the node logs it as an error and reports it on
+        /diagnostics: a misconfiguration is never silent)."""
+        subs, self.missing = [], []
         for role, topic, msgtype in self.topics():
             try:
                 subs.append((role, topic, self.types.get(msgtype).msgclass))
-            except (ImportError, AttributeError) as exc:
-                self.warn('type_not_installed', f'{topic}: {msgtype} is not installed ({exc}); '
-                          'replay bags with it instead')
+            except (ImportError, AttributeError):
+                pkg = msgtype.split('/')[0]
+                self.missing.append(f'{topic} ({role}) is NOT subscribed: its type {msgtype} needs the ROS '
+                                    f'package {pkg}, which is not installed (install {pkg} or clear {role})')
         return subs
 
     # -- messages ---------------------------------------------------------------------------

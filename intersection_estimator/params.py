@@ -8,13 +8,14 @@ two can never disagree.
 
 from __future__ import annotations
 
+import array
 from dataclasses import dataclass, replace
 from pathlib import Path
 import math
 
 import yaml
 
-__all__ = ['ParamSpec', 'PARAMS', 'defaults', 'check', 'load_yaml', 'pipeline_config']
+__all__ = ['ParamSpec', 'PARAMS', 'defaults', 'check', 'plain', 'load_yaml', 'pipeline_config']
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,19 @@ _BY_NAME = {p.name: p for p in PARAMS}
 
 def defaults() -> dict:
     return {p.name: p.default for p in PARAMS}
+
+
+def plain(name: str, value):
+    """A value as ROS hands it over -> the Python type of the table: array parameters come
+    as ``array.array`` (set at run time) or tuples, an empty list in a parameter file as
+    None (no type): all become lists."""
+    spec = _BY_NAME.get(name)
+    if spec is not None and isinstance(spec.default, list):
+        if value is None:
+            return []
+        if isinstance(value, (tuple, array.array)) or hasattr(value, 'tolist'):
+            return list(value.tolist() if hasattr(value, 'tolist') else value)
+    return value
 
 
 def check(name: str, value) -> str | None:
