@@ -39,9 +39,9 @@ def test_node_publishes_topology_without_data(ros_context, node_process):
     node, got = _subscribe(ros_context, Topology, '/intersection_estimator/topology', 'latched')
     try:
         spin = _spinner(ros_context, node)
-        assert wait_for(lambda: node.count_publishers('/intersection_estimator/topology') > 0, 20, spin), \
+        assert wait_for(lambda: node.count_publishers('/intersection_estimator/topology') > 0, 120, spin), \
             proc.output()
-        assert wait_for(lambda: len(got) > 0, 20, spin), proc.output()
+        assert wait_for(lambda: len(got) > 0, 60, spin), proc.output()
         assert proc.alive(), proc.output()
         msg = got[-1]
         assert msg.state == Topology.NO_DATA
@@ -55,7 +55,7 @@ def test_node_publishes_topology_without_data(ros_context, node_process):
 def test_node_refuses_bad_parameter_at_startup(node_process):
     """A parameter outside its range stops the node with a message naming it."""
     proc = node_process([script('intersection_estimator_node'), '--ros-args', '-p', 'budget_ms:=-5.0'])
-    proc.proc.wait(30)
+    proc.proc.wait(120)
     assert proc.proc.returncode != 0
     assert 'budget_ms' in proc.output()
 

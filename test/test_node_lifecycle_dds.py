@@ -25,7 +25,7 @@ class Lifecycle:
     def ready(self) -> bool:
         return self.change.service_is_ready() and self.get.service_is_ready()
 
-    def _call(self, client, request, timeout: float = 60.0):
+    def _call(self, client, request, timeout: float = 120.0):
         future = client.call_async(request)
         assert wait_for(future.done, timeout, self.spin), f'{client.srv_name}: no answer in {timeout} s'
         return future.result()
@@ -50,7 +50,7 @@ def test_managed_node_follows_its_transitions(ros_context, node_process):
     try:
         spin = _spinner(ros_context, listener)
         lc = Lifecycle(ros_context, spin, listener)
-        assert wait_for(lc.ready, 60, spin), proc.output()
+        assert wait_for(lc.ready, 120, spin), proc.output()
         assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
         assert topos == [] and diags == []                # nothing is published unconfigured
         assert lc.transition(Transition.TRANSITION_CONFIGURE), proc.output()
@@ -62,9 +62,9 @@ def test_managed_node_follows_its_transitions(ros_context, node_process):
         assert topos[-1].state == Topology.NO_DATA
         assert lc.transition(Transition.TRANSITION_DEACTIVATE), proc.output()
         assert lc.state() == State.PRIMARY_STATE_INACTIVE
-        spin(0.5)
+        wait_for(lambda: False, 3.0, spin)                # what was in flight arrives
         n = len(diags)                                    # thread stopped: no more ticks
-        wait_for(lambda: False, 1.5, spin)
+        wait_for(lambda: False, 3.0, spin)                # (at 0.1 s a period: ~30 if not)
         assert len(diags) == n
         assert lc.transition(Transition.TRANSITION_CLEANUP), proc.output()
         assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
@@ -86,10 +86,10 @@ def test_managed_node_refuses_to_configure_with_a_bad_parameter(ros_context, nod
     try:
         spin = _spinner(ros_context, client)
         lc = Lifecycle(ros_context, spin, client)
-        assert wait_for(lc.ready, 60, spin), proc.output()
+        assert wait_for(lc.ready, 120, spin), proc.output()
         assert not lc.transition(Transition.TRANSITION_CONFIGURE)
         assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
-        assert wait_for(lambda: 'budget_ms' in proc.output(), 10), proc.output()
+        assert wait_for(lambda: 'budget_ms' in proc.output(), 60), proc.output()
         assert 'Traceback' not in proc.output()
     finally:
         client.destroy_node()
