@@ -16,8 +16,6 @@ p95 (at least 2 x budget_ms). DDS stays on this host with its own domain id.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 from pathlib import Path
 import subprocess
 import sys
@@ -27,19 +25,9 @@ import time
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-BIN = Path(sys.executable).parent
+from measure_node import BIN, ROOT, emit, ros_env   # scripts/ is sys.path[0]
+
 T0 = 1_700_000_000.0
-
-
-def _env() -> dict:
-    home = tempfile.mkdtemp(prefix='ie_burst_')
-    env = dict(os.environ, ROS_DOMAIN_ID=str(150 + os.getpid() % 80), ROS_HOME=home,
-               ROS_LOG_DIR=os.path.join(home, 'log'), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(ROOT / 'config' / 'fastdds_localhost.xml'),
-               AMENT_PREFIX_PATH=os.environ.get('AMENT_PREFIX_PATH') or sys.prefix)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    return env
 
 
 def _rss_mb(pid: int, key: str = 'VmRSS') -> float:
@@ -200,13 +188,7 @@ def main(argv=None) -> int:
     if args.clouds < 1 or args.points < 1 or args.seed < 0:
         print('burst_node: --clouds, --points must be >= 1 and --seed >= 0', file=sys.stderr)
         return 2
-    env = _env()
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_HOME', 'ROS_LOG_DIR',
-                                            'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTRTPS_DEFAULT_PROFILES_FILE')})
-    out = _run(args, env)
-    print(json.dumps(out, indent=1))
-    if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1))
+    emit(_run(args, ros_env('ie_burst_')), args.json)
     return 0
 
 
