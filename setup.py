@@ -15,6 +15,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/bags', glob('bags/*.json') + glob('bags/*.md')),
     ] + [('share/' + package_name + '/' + d, glob(d + '/*')) for d in sorted(glob('bags/*/'))],
     install_requires=['setuptools'],
@@ -29,6 +30,7 @@ setup(
     entry_points={
         'console_scripts': [
             'intersection_estimator_node = intersection_estimator.node:main',
+            'intersection_estimator_lifecycle_node = intersection_estimator.node_lifecycle:main',
             'intersection-estimator = intersection_estimator.cli:main',
         ],
     },

@@ -22,8 +22,13 @@ from msg_adapters.odometry import EgoPose, EgoPoseBuffer, read_odometry
 
 from . import params as P
 from .roles import ODOMETRY, ROLE_TYPES, node_type
+from .tf import TfBuffer, TfMounts, compose
 
-__all__ = ['ROLE_TYPES', 'Ingest', 'RateLimitedLog']
+__all__ = ['ROLE_TYPES', 'TF_TOPICS', 'Ingest', 'RateLimitedLog']
+
+#: TF topics (tf2_msgs/msg/TFMessage) -> static?; fed to :meth:`Ingest.handle_tf`
+TF_TOPICS = {'/tf': False, '/tf_static': True}
+TF_TYPE = 'tf2_msgs/msg/TFMessage'
 
 PENDING_MAX = 256        # messages held back waiting for the ego pose
 JUMP_S = 30.0            # a stamp this far from the time base is suspicious
@@ -62,9 +67,12 @@ class Ingest:
         self.dropped = Counter()
         self._warnings: list[tuple[str, str]] = []
         self._pending: deque = deque(maxlen=PENDING_MAX)
+        self._pending_points = 0
         self.latest_stamp: float | None = None
         self._jumps, self._jump_to = 0, None       # time jump: count of consistent stamps, last one
         self._ego_jumps: list[EgoPose] = []        # ego jump candidates, consistent among themselves
+        self.tf = TfBuffer()                       # /tf, /tf_static: mounts and map -> odom
+        self.missing: list[str] = []               # configured topics whose type is not installed
         self.configure(values)
         self.ego = EgoPoseBuffer(fixed_frame=values['fixed_frame'])
 
@@ -73,7 +81,8 @@ class Ingest:
         self.opts = AdapterOptions(doppler_field=values['doppler_field'] or None,
                                    doppler_sign=float(values['doppler_sign']),
                                    min_existence=float(values['min_existence_probability']),
-                                   mounts=P.mounts(values), max_points=int(values['max_observations']))
+                                   mounts=TfMounts(self.tf, 'base_link', P.mounts(values)),
+                                   max_points=int(values['max_observations']))
 
     # -- topics -----------------------------------------------------------------------------
     def topics(self) -> list[tuple[str, str, str]]:
@@ -84,14 +93,18 @@ class Ingest:
         return out
 
     def subscriptions(self) -> list[tuple[str, str, type]]:
-        """(role, topic, message class) for live subscriptions; skips types not installed."""
-        subs = []
+        """(role, topic, message class) for live subscriptions. A configured topic whose
+        message package is not installed is not subscribed: :attr:`missing` gets one line
+        naming the topic and the package (the node logs it as an error and reports it on
+        /diagnostics: a misconfiguration is never silent)."""
+        subs, self.missing = [], []
         for role, topic, msgtype in self.topics():
             try:
                 subs.append((role, topic, self.types.get(msgtype).msgclass))
-            except (ImportError, AttributeError) as exc:
-                self.warn('type_not_installed', f'{topic}: {msgtype} is not installed ({exc}); '
-                          'replay bags with it instead')
+            except (ImportError, AttributeError):
+                pkg = msgtype.split('/')[0]
+                self.missing.append(f'{topic} ({role}) is NOT subscribed: its type {msgtype} needs the ROS '
+                                    f'package {pkg}, which is not installed (install {pkg} or clear {role})')
         return subs
 
     # -- messages ---------------------------------------------------------------------------
@@ -110,13 +123,38 @@ class Ingest:
                 self._hold(role, msg)
                 return 0
             return self.drop(exc.reason, f'{role}: dropped a message: {exc}')
-        added = estimator.add(dets) if dets is not None and len(dets) else 0
-        if dets is not None and len(dets) > added:
-            self.dropped['non_finite'] += len(dets) - added
+        added = self._add(estimator, dets) if dets is not None and len(dets) else 0
         self.latest_stamp = stamp if self.latest_stamp is None else max(self.latest_stamp, stamp)
         if role == 'odometry_topic' and self._pending:
             added += self._retry_pending(estimator)
         return added
+
+    def _add(self, estimator, dets) -> int:
+        """Add to the window; counts rows it refused (non-finite) and the observations that
+        gave way to the max_observations cap (a burst degrades to dropping, counted)."""
+        before = getattr(estimator, 'evicted', 0)
+        added = estimator.add(dets)
+        if len(dets) > added:
+            self.dropped['non_finite'] += len(dets) - added
+        pushed = getattr(estimator, 'evicted', 0) - before
+        if pushed:
+            self.dropped['window_full'] += pushed
+            self.warn('window_full', f'max_observations={self.values["max_observations"]} reached: '
+                      f'{pushed} older observation(s) gave way')
+        return added
+
+    def handle_tf(self, msg, static: bool) -> int:
+        """A ``tf2_msgs/TFMessage`` from ``/tf`` (``static`` False) or ``/tf_static``: sensor
+        mounts and ``map -> odom`` come from it (the ``mount_*`` parameters are the fallback).
+        Returns the transforms taken."""
+        self.received['tf_static' if static else 'tf'] += 1
+        try:
+            n = self.tf.add(msg, static)
+        except Exception as exc:  # noqa: BLE001 - a malformed message is dropped, counted
+            return self.drop('malformed', f'{"/tf_static" if static else "/tf"}: dropped a message: {exc}')
+        if n == 0 and len(getattr(msg, 'transforms', ()) or ()):
+            return self.drop('malformed', f'{"/tf_static" if static else "/tf"}: no usable transform in a message')
+        return n
 
     def drop(self, reason: str, text: str) -> int:
         self.dropped[reason] += 1
@@ -135,10 +173,17 @@ class Ingest:
         return out
 
     def _hold(self, role, msg) -> None:
-        if len(self._pending) == self._pending.maxlen:
-            self.drop('no_ego_pose', f'{role}: no ego pose for {PENDING_MAX} held-back messages; '
-                      'dropping the oldest (is odometry published?)')
+        """Hold a message back until odometry covers its stamp: at most PENDING_MAX messages
+        and max_observations points (a burst before the first pose must not grow memory)."""
+        cap = int(self.values['max_observations'])
+        size = _points_of(msg)
+        while self._pending and (len(self._pending) == self._pending.maxlen
+                                 or self._pending_points + size > cap):
+            self._pending_points -= _points_of(self._pending.popleft()[1])
+            self.drop('no_ego_pose', f'{role}: no ego pose for {len(self._pending) + 1} held-back messages '
+                      f'({self._pending_points + size} points); dropping the oldest (is odometry published?)')
         self._pending.append((role, msg))
+        self._pending_points += size
 
     def _check_stamp(self, msg, estimator) -> float:
         """Stamp of ``msg`` in seconds; refuses non-finite ones and unconfirmed time jumps."""
@@ -162,7 +207,8 @@ class Ingest:
             self.latest_stamp, self._jumps, self._jump_to = stamp, 0, None
             self._ego_jumps.clear()
             self.ego.clear()
-            self._pending.clear()
+            self.tf.clear()
+            self._set_pending([])
             estimator.reset()
         else:
             self._jumps, self._jump_to = 0, None
@@ -206,8 +252,7 @@ class Ingest:
         relocalisation is accepted after JUMP_CONFIRM consistent poses (the buffer restarts).
         """
         if pose.frame_id and pose.frame_id != self.ego.fixed_frame:
-            raise AdapterError('frame_mismatch', f'odometry in {pose.frame_id!r}, fixed frame is '
-                                                 f'{self.ego.fixed_frame!r}')
+            pose = self._to_fixed(pose)
         if not (abs(pose.x) <= MAX_COORD and abs(pose.y) <= MAX_COORD):
             raise AdapterError('out_of_range', f'ego pose ({pose.x:g}, {pose.y:g}) beyond {MAX_COORD:g} m')
         twist = (pose.vx, pose.vy, pose.yaw_rate)
@@ -230,6 +275,17 @@ class Ingest:
             self.ego.add(p)
         self._ego_jumps.clear()
 
+    def _to_fixed(self, pose: EgoPose) -> EgoPose:
+        """Odometry in another frame (REP 105: ``odom``) -> the fixed frame through TF
+        (``map -> odom`` at the pose stamp); twist stays in the child frame."""
+        fixed = self.ego.fixed_frame
+        tf = self.tf.lookup(fixed, pose.frame_id, pose.stamp)
+        if tf is None:
+            raise AdapterError('frame_mismatch', f'odometry in {pose.frame_id!r}, fixed frame is {fixed!r} '
+                               f'and /tf has no {fixed} -> {pose.frame_id} transform at {pose.stamp:.3f} s')
+        x, y, yaw = compose(tf, (pose.x, pose.y, pose.yaw))
+        return replace(pose, frame_id=fixed, x=x, y=y, yaw=yaw)
+
     def _waits_for_pose(self, msg) -> bool:
         latest = self.ego.latest
         return latest is None or self._stamp(msg) > latest.stamp
@@ -240,20 +296,23 @@ class Ingest:
 
     def _retry_pending(self, estimator) -> int:
         latest = self.ego.latest.stamp
-        pending, self._pending = list(self._pending), deque(maxlen=PENDING_MAX)
+        pending = list(self._pending)
+        self._set_pending([(r, m) for r, m in pending if self._stamp(m) > latest])
         added = 0
         for role, msg in pending:
-            stamp = self._stamp(msg)
-            if stamp > latest:
-                self._pending.append((role, msg))
+            if self._stamp(msg) > latest:
                 continue
             try:
                 dets = self._convert(role, msg)
             except AdapterError as exc:
                 self.drop(exc.reason, f'{role}: dropped a held-back message: {exc}')
                 continue
-            added += estimator.add(dets)
+            added += self._add(estimator, dets) if len(dets) else 0
         return added
+
+    def _set_pending(self, items) -> None:
+        self._pending = deque(items, maxlen=PENDING_MAX)
+        self._pending_points = sum(_points_of(m) for _, m in self._pending)
 
     # -- ego --------------------------------------------------------------------------------
     def ego_pose(self) -> tuple[float, float, float] | None:
@@ -272,7 +331,20 @@ class Ingest:
 
     def forget_before(self, t: float) -> None:
         """After a reset: drop held-back messages older than ``t``."""
-        self._pending = deque(((r, m) for r, m in self._pending if self._stamp(m) >= t), maxlen=PENDING_MAX)
+        self._set_pending([(r, m) for r, m in self._pending if self._stamp(m) >= t])
+
+
+def _points_of(msg) -> int:
+    """Rows a held-back message will become (cloud points, objects, poses, returns)."""
+    try:
+        if hasattr(msg, 'width') and hasattr(msg, 'height'):
+            return max(int(msg.width) * int(msg.height), 1)
+        for name in ('objects', 'poses', 'returns'):
+            if hasattr(msg, name):
+                return max(len(getattr(msg, name)), 1)
+    except (TypeError, ValueError, OverflowError):
+        pass
+    return 1
 
 
 def _plausible(a: EgoPose, b: EgoPose) -> bool:

@@ -8,13 +8,14 @@ two can never disagree.
 
 from __future__ import annotations
 
+import array
 from dataclasses import dataclass, replace
 from pathlib import Path
 import math
 
 import yaml
 
-__all__ = ['ParamSpec', 'PARAMS', 'defaults', 'check', 'load_yaml', 'pipeline_config']
+__all__ = ['ParamSpec', 'PARAMS', 'defaults', 'check', 'plain', 'load_yaml', 'pipeline_config']
 
 
 @dataclass(frozen=True)
@@ -49,12 +50,14 @@ PARAMS: tuple[ParamSpec, ...] = (
               'intersection_estimator_msgs/TrackedObjectArray tracked objects'),
     ParamSpec('autoware_object_topics', [''],
               'autoware_perception_msgs/TrackedObjects (live only if Autoware msgs are installed)'),
-    ParamSpec('odometry_topic', '/localization/odometry', 'nav_msgs/Odometry ego pose in the fixed frame'),
+    ParamSpec('odometry_topic', '/localization/odometry', 'nav_msgs/Odometry ego pose in the fixed frame '
+              '(or in odom, with map -> odom on /tf)'),
     ParamSpec('doppler_field', '', "Doppler field name; '' = first of doppler, velocity, radial_velocity, v_r"),
     ParamSpec('doppler_sign', 1, '+1: positive Doppler = moving away from the sensor; -1: the opposite',
               choices=(1, -1)),
     ParamSpec('min_existence_probability', 0.3, 'tracked objects below this are ignored', 0.0, 1.0),
-    ParamSpec('mount_frames', ['radar'], 'sensor frame ids with a static mount on base_link'),
+    ParamSpec('mount_frames', ['radar'], 'sensor frame ids with a static mount on base_link (fallback '
+              'for frames /tf_static does not connect to base_link)'),
     ParamSpec('mount_x', [3.7], 'mount x of each mount_frames entry in base_link [m]'),
     ParamSpec('mount_y', [0.0], 'mount y of each mount_frames entry in base_link [m]'),
     ParamSpec('mount_yaw', [0.0], 'mount yaw of each mount_frames entry in base_link [rad]'),
@@ -78,6 +81,19 @@ _BY_NAME = {p.name: p for p in PARAMS}
 
 def defaults() -> dict:
     return {p.name: p.default for p in PARAMS}
+
+
+def plain(name: str, value):
+    """A value as ROS hands it over -> the Python type of the table: array parameters come
+    as ``array.array`` (set at run time) or tuples, an empty list in a parameter file as
+    None (no type): all become lists."""
+    spec = _BY_NAME.get(name)
+    if spec is not None and isinstance(spec.default, list):
+        if value is None:
+            return []
+        if isinstance(value, (tuple, array.array)) or hasattr(value, 'tolist'):
+            return list(value.tolist() if hasattr(value, 'tolist') else value)
+    return value
 
 
 def check(name: str, value) -> str | None:

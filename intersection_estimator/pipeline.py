@@ -182,6 +182,7 @@ class OnlineEstimator:
         self._seed = seed
         self._resets = 0
         self._lock = threading.Lock()   # add() may run in another thread than tick()
+        self.evicted = 0                # observations the max_observations cap pushed out, ever
         self.reset()
 
     def reset(self) -> None:
@@ -213,7 +214,13 @@ class OnlineEstimator:
     def idle(self) -> bool:
         """Would the next tick draw no sample (unchanged, converged estimate; see
         :func:`needs_sampling`)? Its result is then the previous one."""
-        return not needs_sampling(self._dirty, self.result.state, self._idle_ticks)
+        return not needs_sampling(self._dirty, self.result.sampler_state, self._idle_ticks)
+
+    @property
+    def resets(self) -> int:
+        """How often the estimator started over (1 after construction): a change tells a
+        publisher that the previous intersection's outputs are void."""
+        return self._resets
 
     def window(self) -> Detections:
         """The observations currently in the window."""
@@ -221,21 +228,48 @@ class OnlineEstimator:
             return Detections.concat(self._parts)
 
     def add(self, dets: Detections) -> int:
-        """Append finite detections to the window; returns how many were kept."""
+        """Append finite detections to the window; returns how many finite ones came.
+
+        The window never holds more than ``max_observations``, not even between ticks: the
+        oldest observations (in arrival order) give way to new ones, and a message larger
+        than the cap keeps its newest rows. What gave way is counted in :attr:`evicted`.
+        """
         dets = dets.finite()
-        if len(dets):
+        n = len(dets)
+        if n:
             with self._lock:
-                self._parts.append(dets)
-                self._n += len(dets)
+                self._make_room(n)
+                self._parts.append(dets if n <= self.config.max_observations
+                                   else dets.subset(_newest(dets.t, self.config.max_observations)))
+                self._n += len(self._parts[-1])
+                self.evicted += n - len(self._parts[-1])
                 self._dirty = True
-        return len(dets)
+        return n
+
+    def _make_room(self, n: int) -> None:
+        """Drop the oldest parts (the front one maybe in part, as a view: no copy) so that
+        ``n`` more observations fit under the cap (with the lock held)."""
+        over = self._n + min(n, self.config.max_observations) - self.config.max_observations
+        while over > 0 and self._parts:
+            first = self._parts[0]
+            k = min(over, len(first))
+            if k == len(first):
+                self._parts.pop(0)
+            else:
+                self._parts[0] = first.subset(slice(k, None))
+            self._n -= k
+            self.evicted += k
+            over -= k
 
     def _window(self, now: float) -> Detections:
         cfg = self.config
         dets = Detections.concat(self._parts)
         keep = dets.t >= now - cfg.window_s
-        if keep.sum() > cfg.max_observations:
-            keep &= dets.t >= np.sort(dets.t[keep])[-cfg.max_observations]
+        if keep.sum() > cfg.max_observations:   # exactly the newest: ties at the cut-off too
+            idx = np.flatnonzero(keep)
+            keep = np.zeros(len(dets), bool)
+            keep[idx[_newest(dets.t[idx], cfg.max_observations)]] = True
+            self.evicted += len(idx) - cfg.max_observations
         if not keep.all():
             dets = dets.subset(keep)
         self._parts = [dets]
@@ -274,7 +308,7 @@ class OnlineEstimator:
         with self._lock:
             dirty, self._dirty = self._dirty, False
             self._idle_ticks = 0 if dirty else self._idle_ticks + 1
-            if not needs_sampling(dirty, self.result.state, self._idle_ticks - 1):
+            if not needs_sampling(dirty, self.result.sampler_state, self._idle_ticks - 1):
                 # nothing new and converged: the estimate stands, at no cost (an idle node,
                 # a gap in bag time); sampling resumes with the next observations
                 self.result = replace(self.result, timing_ms={'topology': 0.0, 'lanes': 0.0, 'total': 0.0},
@@ -374,6 +408,13 @@ def needs_sampling(new_data: bool, state: str, idle_ticks: int) -> bool:
 
 #: Least share of the tick budget a step gets even when the tick is already late.
 MIN_SHARE = 0.05
+
+
+def _newest(t: np.ndarray, k: int) -> np.ndarray:
+    """Indices (in their order) of the ``k`` newest stamps of ``t``; among equal stamps the
+    later rows (later arrivals) win, so exactly ``k`` are kept even when all stamps agree."""
+    order = np.argsort(t, kind='stable')[-k:]
+    return np.sort(order)
 
 
 def _left(end: float, total: float) -> float:

@@ -23,14 +23,14 @@ import numpy as np
 
 from intersection_estimator.palette import RGBA
 
-__all__ = ['NAMESPACES', 'COLORS', 'markers_msg', 'lanelet_marker_id']
+__all__ = ['NAMESPACES', 'COLORS', 'markers_msg', 'clear_markers_msg', 'lanelet_marker_id']
 
 NAMESPACES = ('center', 'arm_axes', 'left_lane_bound', 'right_lane_bound', 'center_lane_line',
               'center_line_arrows', 'connectors', 'lanelet_id')
 #: RGBA per kind of drawing: the package's one palette (the PNG uses the same colours).
 COLORS = RGBA
 ARROW, SPHERE, LINE_STRIP, TEXT_VIEW_FACING, TRIANGLE_LIST = 0, 2, 4, 9, 11
-ADD, DELETE = 0, 2
+ADD, DELETE, DELETEALL = 0, 2, 3
 _ARROW_SPACING = 8.0   # [m] between center line arrows
 _ARROW_SIZE = 1.2      # [m]
 
@@ -142,3 +142,11 @@ def markers_msg(types, header, intersection, lanelets=(), previous_keys=frozense
     for ns, mid in sorted(set(previous_keys) - keys):
         markers.append(b.marker(ns, mid, ARROW, 'arrow', action=DELETE))
     return types.get('visualization_msgs/msg/MarkerArray')(markers=markers), keys
+
+
+def clear_markers_msg(types, header):
+    """MarkerArray with one DELETEALL (empty namespace: every marker of the display): what a
+    reset publishes, so that RViz / Foxglove drop the previous intersection's lanes."""
+    b = _Builder(types, header)
+    return types.get('visualization_msgs/msg/MarkerArray')(
+        markers=[b.marker('', 0, ARROW, 'arrow', action=DELETEALL)])

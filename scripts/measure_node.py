@@ -26,12 +26,25 @@ ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
 
-def _env() -> dict:
-    home = tempfile.mkdtemp(prefix='ie_measure_')
-    return dict(os.environ, ROS_DOMAIN_ID=str(120 + os.getpid() % 100), ROS_HOME=home,
-                ROS_LOG_DIR=os.path.join(home, 'log'), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-                FASTRTPS_DEFAULT_PROFILES_FILE=str(ROOT / 'config' / 'fastdds_localhost.xml'),
-                AMENT_PREFIX_PATH=os.environ.get('AMENT_PREFIX_PATH') or sys.prefix)
+def ros_env(prefix: str = 'ie_measure_') -> dict:
+    """Environment for this host only (own domain id, temporary ROS_HOME, fast discovery),
+    also applied to this process (its rclpy listener); returns it for the child processes."""
+    home = tempfile.mkdtemp(prefix=prefix)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(120 + os.getpid() % 100), ROS_HOME=home,
+               ROS_LOG_DIR=os.path.join(home, 'log'), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(ROOT / 'config' / 'fastdds_localhost.xml'),
+               AMENT_PREFIX_PATH=os.environ.get('AMENT_PREFIX_PATH') or sys.prefix)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_HOME', 'ROS_LOG_DIR',
+                                            'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTRTPS_DEFAULT_PROFILES_FILE')})
+    return env
+
+
+def emit(out: dict, json_path: str | None) -> None:
+    """Print the result as JSON (and write it to ``json_path``)."""
+    print(json.dumps(out, indent=1))
+    if json_path:
+        Path(json_path).write_text(json.dumps(out, indent=1))
 
 
 def _listen(args, env):
@@ -121,15 +134,9 @@ def main(argv=None) -> int:
     if not Path(args.bag).exists():
         print(f'measure_node: no such bag: {args.bag}', file=sys.stderr)
         return 1
-    env = _env()
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_HOME', 'ROS_LOG_DIR',
-                                            'ROS_AUTOMATIC_DISCOVERY_RANGE',
-                                            'FASTRTPS_DEFAULT_PROFILES_FILE')})
+    env = ros_env()
     diags, topos, t_play, n_arms = _listen(args, env)
-    out = _summary(diags, topos, t_play, n_arms, args.rate)
-    print(json.dumps(out, indent=1))
-    if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1))
+    emit(_summary(diags, topos, t_play, n_arms, args.rate), args.json)
     return 0
 
 

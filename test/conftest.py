@@ -21,10 +21,33 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+_DOMAIN_LOCK = None   # held open for the life of this process
+
+
+def _free_domain() -> int:
+    """A ROS_DOMAIN_ID no other test run on this machine holds: an exclusive lock on a file
+    per id (released by the OS when the process ends, even on a crash), searched from a
+    pid-based start. Two runs in one domain would see each other's nodes and topics."""
+    global _DOMAIN_LOCK
+    import fcntl
+    start = os.getpid() % 100
+    for k in range(100):
+        domain = 1 + (start + k) % 100
+        f = open(os.path.join(tempfile.gettempdir(), f'ie_ros_domain_{domain}.lock'), 'w')
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.close()
+            continue
+        _DOMAIN_LOCK = f
+        return domain
+    return 1 + start
+
+
 def _ros_env() -> dict:
     home = tempfile.mkdtemp(prefix='ie_ros_home_')
     return {
-        'ROS_DOMAIN_ID': str(1 + os.getpid() % 100),
+        'ROS_DOMAIN_ID': str(_free_domain()),
         'ROS_HOME': home,
         'ROS_LOG_DIR': os.path.join(home, 'log'),
         'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',

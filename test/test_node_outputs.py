@@ -1,0 +1,99 @@
+"""Issue 16, the node in-process (no second process): outputs stamped with data time, a reset
+clears latched lanes and markers, missing message packages are errors on /diagnostics,
+array parameters (mount_*) settable at run time."""
+
+from __future__ import annotations
+
+import array
+
+import numpy as np
+import pytest
+
+from intersection_estimator.lanes import lanelets_from_topology
+from intersection_estimator.model import Arm, Intersection
+from intersection_estimator.pipeline import EstimateResult
+
+T_DATA = 1_700_000_123.25
+
+
+@pytest.fixture
+def make_node(ros_context):
+    """Factory of in-process nodes (a long timer period: the test drives the publishing);
+    every publish is recorded per topic in ``node.sent``."""
+    from rclpy.parameter import Parameter
+    from intersection_estimator.node import IntersectionEstimatorNode
+    nodes = []
+
+    def make(**params):
+        params.setdefault('timer_period', 10.0)
+        node = IntersectionEstimatorNode(context=ros_context,
+                                         parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+        node.sent = {}
+        for name in ('topology', 'lanelets', 'markers', 'diag'):
+            pub = getattr(node, f'pub_{name}')
+            pub.publish = (lambda msg, n=name: node.sent.setdefault(n, []).append(msg))
+        nodes.append(node)
+        return node
+    yield make
+    for node in nodes:
+        node.destroy_node()
+
+
+def _result() -> EstimateResult:
+    inter = Intersection(center=np.array([10.0, 20.0]), arms=[Arm(angle=a) for a in (0.0, 1.6, 3.1, 4.7)])
+    return EstimateResult(inter, lanelets_from_topology(inter), {'total': 1.0}, 100, 10, -5.0,
+                          'CONVERGED', 500, True)
+
+
+def test_outputs_carry_data_time_and_zero_before_data(make_node):
+    node = make_node()
+    node._publish(None, 0.0, None)
+    stamp = node.sent['topology'][-1].header.stamp
+    assert (stamp.sec, stamp.nanosec) == (0, 0)          # no data yet: no (wall) time to claim
+    node._publish(_result(), 0.0, T_DATA)
+    for name in ('topology', 'lanelets', 'diag'):
+        s = node.sent[name][-1].header.stamp
+        assert s.sec + 1e-9 * s.nanosec == pytest.approx(T_DATA, abs=1e-6), name
+    assert all(m.header.stamp.sec == int(T_DATA) for m in node.sent['markers'][-1].markers)
+
+
+def test_a_reset_deletes_all_markers_and_publishes_empty_lanelets(make_node):
+    from visualization_msgs.msg import Marker
+    node = make_node()
+    node._publish(_result(), 0.0, T_DATA)
+    assert node.sent['lanelets'][-1].lanelets and node.sent['markers'][-1].markers
+    node.estimator.reset()                               # what "ego passed" / a time jump do
+    node._publish(None, 0.0, T_DATA + 1.0)
+    (clear,) = node.sent['markers'][-1].markers
+    assert clear.action == Marker.DELETEALL
+    assert list(node.sent['lanelets'][-1].lanelets) == []
+    n = len(node.sent['markers'])
+    node._publish(None, 0.0, T_DATA + 2.0)               # once per reset, not every tick
+    assert len(node.sent['markers']) == n
+
+
+def test_topics_of_missing_packages_are_an_error_on_diagnostics(make_node):
+    from diagnostic_msgs.msg import DiagnosticStatus
+    node = make_node(radar_scan_topics=['/radar/scan'], autoware_object_topics=['/aw/objects'])
+    node._publish(None, 0.0, None)
+    (err,) = [s for s in node.sent['diag'][-1].status if s.level == DiagnosticStatus.ERROR]
+    for text in ('/radar/scan', 'radar_msgs', '/aw/objects', 'autoware_perception_msgs'):
+        assert text in err.message
+
+
+def test_mount_arrays_are_settable_at_run_time(make_node):
+    """``ros2 param set`` hands array parameters over as array('d'): accepted, applied."""
+    from rclpy.parameter import Parameter
+    node = make_node()
+    res = node.set_parameters([Parameter('mount_x', Parameter.Type.DOUBLE_ARRAY, array.array('d', [2.5]))])
+    assert res[0].successful, res[0].reason
+    assert node.ingest.opts.mounts['radar'] == (2.5, 0.0, 0.0)
+    res = node.set_parameters_atomically([
+        Parameter('mount_frames', Parameter.Type.STRING_ARRAY, ['radar', 'rear']),
+        Parameter('mount_x', Parameter.Type.DOUBLE_ARRAY, array.array('d', [2.5, -1.0])),
+        Parameter('mount_y', Parameter.Type.DOUBLE_ARRAY, array.array('d', [0.0, 0.0])),
+        Parameter('mount_yaw', Parameter.Type.DOUBLE_ARRAY, array.array('d', [0.0, 3.14]))])
+    assert res.successful, res.reason
+    assert node.ingest.opts.mounts['rear'] == (-1.0, 0.0, 3.14)
+    res = node.set_parameters([Parameter('mount_y', Parameter.Type.DOUBLE_ARRAY, array.array('d', [1.0]))])
+    assert not res[0].successful and 'mount_y' in res[0].reason
