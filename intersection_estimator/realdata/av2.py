@@ -25,21 +25,20 @@ outside the repository and never copied into it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import json
 from pathlib import Path
 import zlib
 
 import numpy as np
 
-from ..model import Lanelet
 from ..observations import Detections
 from ..scenarios.floor import label_points, match_segments, traffic_counts, traffic_lines
 from ..scenarios.lanegraph import Segment, gt_from_lane_graph
-from ..sim import Scenario, SimConfig
+from ..scenarios.base import FamilyScenario
+from ..sim import SimConfig
 from ..sim.traffic import EgoTrajectory, Track
 
-__all__ = ['Av2Error', 'RealScenario', 'load_av2', 'av2_segments', 'find_scenarios', 'LABELS',
+__all__ = ['Av2Error', 'load_av2', 'av2_segments', 'find_scenarios', 'LABELS',
            'register', 'convert']
 
 #: AV2 object_type -> Autoware ObjectClassification label
@@ -53,20 +52,6 @@ RATE_HZ = 10.0
 
 class Av2Error(ValueError):
     """The folder is not a readable AV2 scenario (one-line message)."""
-
-
-@dataclass
-class RealScenario(Scenario):
-    """A :class:`Scenario` whose ``real`` streams (mode -> (Detections, cycle)) are data."""
-
-    real: dict = field(default_factory=dict, repr=False)
-    extra_gt: dict = field(default_factory=dict, repr=False)   # per lane id: gt.json additions
-    info: dict = field(default_factory=dict)
-
-    def _stream(self, mode: str, rng_seed_offset: int = 0):
-        if mode in self.real and int(rng_seed_offset) == 0:
-            return self.real[mode]
-        return super()._stream(mode, rng_seed_offset)
 
 
 def _files(folder: Path):
@@ -195,8 +180,8 @@ def _pick(segs, groups, xy, heading):
     return groups[int(np.argmax([(sc, len(g)) for sc, g in zip(score, groups)], axis=0)[0])]
 
 
-def load_av2(folder, *, arm_length: float = 60.0) -> RealScenario:
-    """One AV2 scenario folder -> :class:`RealScenario` (module doc)."""
+def load_av2(folder, *, arm_length: float = 60.0) -> FamilyScenario:
+    """One AV2 scenario folder -> :class:`FamilyScenario` (module doc)."""
     df, log_map = _read(folder)
     segs = av2_segments(log_map)
     groups = _junctions(segs)
@@ -216,7 +201,7 @@ def load_av2(folder, *, arm_length: float = 60.0) -> RealScenario:
     lines = traffic_lines(gt.lanelets, rows['xy'], labels)
     sid = Path(folder).name
     cfg = SimConfig(sensor_mount=0.0)
-    sc = RealScenario(seed=zlib.crc32(sid.encode()) & 0x7FFFFFFF, config=cfg,
+    sc = FamilyScenario(seed=zlib.crc32(sid.encode()) & 0x7FFFFFFF, config=cfg,
                       gt=gt.intersection, gt_lanelets=gt.lanelets, traffic=counts,
                       tracks=tracks, ego=ego, duration=float(ego.t[-1]), stop=gt.stop,
                       sensor_range=cfg.sensor_range)
