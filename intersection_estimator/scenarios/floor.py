@@ -113,19 +113,23 @@ def label_points(seg: np.ndarray, vehicle: np.ndarray, gt) -> np.ndarray:
     seg = np.asarray(seg).astype(str)
     vehicle = np.asarray(vehicle).astype(str)
     out = np.full(len(seg), '', dtype=object)
-    for v in np.unique(vehicle):
-        idx = np.flatnonzero(vehicle == v)
-        cons = [con_of[s] for s in seg[idx] if s in con_of]
+    v_codes, v_of = np.unique(vehicle, return_inverse=True)
+    s_codes, s_of = np.unique(seg, return_inverse=True)
+    for v in range(len(v_codes)):
+        idx = np.flatnonzero(v_of == v)
+        segs_v = s_codes[s_of[idx]]
+        cons = [con_of[s] for s in segs_v if s in con_of]
         mine = set()
         if cons:
-            c = max(set(cons), key=cons.count)
+            c = max(sorted(set(cons)), key=cons.count)
             mine = {c, entering_of.get(c, ''), by_id[c].successors[0]}
-        for i in idx:
-            cand = [con_of[seg[i]]] if seg[i] in con_of else owners.get(seg[i], [])
+        pick = {}
+        for s in set(segs_v.tolist()):       # one decision per (vehicle, segment)
+            cand = [con_of[s]] if s in con_of else owners.get(s, [])
             if mine:
                 cand = [x for x in cand if x in mine]
-            if len(cand) == 1:
-                out[i] = cand[0]
+            pick[s] = cand[0] if len(cand) == 1 else ''
+        out[idx] = [pick[s] for s in segs_v]
     return out.astype(str)
 
 

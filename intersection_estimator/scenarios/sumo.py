@@ -104,17 +104,20 @@ def _traffic(sc: FamilyScenario, fcd, gt, id_of: dict):
     """Traffic per lanelet and traffic-following lines from the tracked detections of
     cars and trucks, each labelled with the SUMO lane its vehicle was on (module doc)."""
     users = [f for f in fcd if f.kind in LANE_USERS]
-    seg = np.concatenate([f.lane for f in users]) if users else np.zeros(0, str)
-    veh = np.concatenate([np.full(len(f.cycle), f.id) for f in users]) if users else seg
-    lab = label_points(seg, veh, gt)
-    key = {}
-    pos = 0
-    for f in users:
-        for c in f.cycle:
-            key[(id_of[f.id], int(c))] = lab[pos]
-            pos += 1
     dets, cyc = sc._stream('tracked')
-    labels = np.array([key.get((int(i), int(c)), '') for i, c in zip(dets.track_id, cyc)])
+    labels = np.full(len(dets), '', dtype=object)
+    if users:
+        seg = np.concatenate([f.lane for f in users])
+        veh = np.concatenate([np.full(len(f.cycle), f.id) for f in users])
+        lab = label_points(seg, veh, gt)
+        big = 1 << 32                           # (track id, cycle) -> one sortable code
+        code = np.concatenate([id_of[f.id] * big + f.cycle for f in users])
+        order = np.argsort(code)
+        q = dets.track_id.astype(np.int64) * big + cyc
+        j = np.clip(np.searchsorted(code[order], q), 0, len(code) - 1)
+        hit = code[order][j] == q
+        labels[hit] = lab[order][j[hit]]
+    labels = labels.astype(str)
     sc.traffic = traffic_counts(gt.lanelets, labels, dets.track_id)
     sc.extra_gt = {lid: {'traffic_line': line}
                    for lid, line in traffic_lines(gt.lanelets, dets.xy, labels).items()}
@@ -137,7 +140,7 @@ def sumo_scenario(seed: int, cfg: SumoConfig = SumoConfig(), sim: SimConfig = Si
         depart = cfg.warmup_s - 6.0 + float(g_time.uniform(0.0, 0.3)) * duration
         routes = write_routes(g_dem, net, cfg, folder, ego_lane, sink, depart, end)
         fcd_path = run_sumo(net_path, routes, folder, seed=int(g_sumo.integers(2 ** 31)), end=end,
-                            step=cfg.step_s)
+                            step=cfg.step_s, record_from=cfg.warmup_s)
         fcd = read_fcd(fcd_path, cfg.warmup_s, duration, cfg.step_s)
     rate = 1.0 / cfg.step_s
     n_cyc = int(round(duration * rate)) + 1

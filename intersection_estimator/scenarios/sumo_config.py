@@ -43,7 +43,7 @@ class SumoConfig:
     pedestrians_per_h: tuple[float, float] = (0.0, 600.0)
     parked: tuple[int, int] = (0, 6)                # parked cars at the kerb
     # --- time ------------------------------------------------------------------------------
-    warmup_s: float = 40.0                          # traffic builds up (queues) first
+    warmup_s: float = 30.0                          # traffic builds up (queues) first
     duration: tuple[float, float] = (30.0, 45.0)    # recorded window [s]
     step_s: float = 0.1
     gt_arm_length_m: float = 60.0                   # GT lanes this far out from the box

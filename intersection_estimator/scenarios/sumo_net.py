@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+import os
 from pathlib import Path
 import subprocess
 from xml.sax.saxutils import quoteattr
@@ -64,8 +65,10 @@ def sumo_binary(name: str) -> str:
 
 
 def realdata_dir() -> Path:
-    """``../shared/realdata`` beside the checkout (CI lays shared/ beside the clone)."""
-    return Path(__file__).resolve().parents[2].parent / 'shared' / 'realdata'
+    """``$IE_REALDATA`` if set, else ``../shared/realdata`` beside the checkout (CI lays
+    shared/ beside the clone)."""
+    env = os.environ.get('IE_REALDATA')
+    return Path(env) if env else Path(__file__).resolve().parents[2].parent / 'shared' / 'realdata'
 
 
 def _angles(rng, n, min_deg):

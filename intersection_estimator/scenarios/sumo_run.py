@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 from pathlib import Path
-import xml.etree.ElementTree as ET
+import re
 
 import numpy as np
 
@@ -33,31 +33,47 @@ class FcdTrack:
     lane: np.ndarray          # (M,) str, '' for persons
 
 
-def run_sumo(net, routes, folder, *, seed: int, end: float, step: float) -> Path:
+def run_sumo(net, routes, folder, *, seed: int, end: float, step: float, record_from: float = 0.0
+             ) -> Path:
+    """Run SUMO to ``end`` s; floating-car data from ``record_from`` s on."""
     fcd = Path(folder) / 'fcd.xml'
     run_tool([sumo_binary('sumo'), '-n', str(net), '-r', str(routes), '--begin', '0',
               '--end', f'{end:.1f}', '--step-length', f'{step}', '--seed', str(int(seed)),
-              '--fcd-output', str(fcd), '--no-step-log', 'true', '--no-warnings', 'true',
+              '--fcd-output', str(fcd), '--device.fcd.begin', f'{record_from:.1f}',
+              '--fcd-output.attributes', 'x,y,angle,speed,lane,type',
+              '--pedestrian.model', 'nonInteracting',
+              '--no-step-log', 'true', '--no-warnings', 'true',
               '--ignore-route-errors', 'true', '--time-to-teleport', '-1',
               '--collision.action', 'none', '--duration-log.disable', 'true'], 'sumo')
     return fcd
 
 
+_STEP = re.compile(rb'<timestep time="([^"]+)"')
+_OBJ = re.compile(rb'<(vehicle|person) ([^>]*?)/?>')
+_ATTR = re.compile(rb'(\w+)="([^"]*)"')
+
+
 def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack]:
-    """Tracks in the window (module doc), sorted by id."""
+    """Tracks in the window (module doc), sorted by id. A line scanner over SUMO's
+    one-element-per-line fcd file (several times faster than an XML tree walk)."""
     rows: dict = {}
-    for _, el in ET.iterparse(str(path), events=('end',)):
-        if el.tag != 'timestep':
-            continue
-        t = float(el.get('time'))
-        if warmup - 1e-6 <= t <= warmup + duration + 1e-6:
-            cyc = int(round((t - warmup) / step))
-            for obj in el:
-                kind = obj.get('type', 'person') if obj.tag == 'vehicle' else 'person'
-                rows.setdefault(obj.get('id'), (kind, []))[1].append(
-                    (cyc, float(obj.get('x')), float(obj.get('y')), float(obj.get('angle')),
-                     float(obj.get('speed')), obj.get('lane', '')))
-        el.clear()
+    cyc, inside = 0, False
+    with open(path, 'rb') as fh:
+        for line in fh:
+            m = _STEP.search(line)
+            if m:
+                t = float(m.group(1))
+                inside = warmup - 1e-6 <= t <= warmup + duration + 1e-6
+                cyc = int(round((t - warmup) / step))
+                continue
+            m = _OBJ.search(line) if inside else None
+            if m is None:
+                continue
+            a = dict(_ATTR.findall(m.group(2)))
+            kind = a.get(b'type', b'person').decode() if m.group(1) == b'vehicle' else 'person'
+            rows.setdefault(a[b'id'].decode(), (kind, []))[1].append(
+                (cyc, float(a[b'x']), float(a[b'y']), float(a[b'angle']), float(a[b'speed']),
+                 a.get(b'lane', b'').decode()))
     out = []
     for vid in sorted(rows):
         kind, r = rows[vid]
