@@ -4,7 +4,7 @@ A line that simply follows the traffic: per true lane, the points of the vehicle
 drove it (as the data give them: tracked detections, or the real tracks) projected onto
 the lane's center line, their signed lateral offsets smoothed along the lane with a
 Gaussian kernel (``sigma_m``), evaluated every ``step_m`` where at least ``min_weight``
-points' worth of kernel weight supports it. Its mean orthogonal distance to the true
+points' worth of kernel weight supports it and a point lies within ``sigma_m``. Its mean orthogonal distance to the true
 center line (:mod:`intersection_estimator.evaluate`, ``floor_cm``) is what following the
 traffic costs on that case: lane courses well below it fit the map, not the data.
 
@@ -59,7 +59,10 @@ def traffic_line(line: np.ndarray, points: np.ndarray, *, sigma_m: float = 2.0,
         return None
     w = np.exp(-0.5 * ((grid[:, None] - s[None]) / sigma_m) ** 2)
     wsum = w.sum(1)
-    ok = wsum >= min_weight
+    srt = np.sort(s)
+    j = np.clip(np.searchsorted(srt, grid), 1, len(srt) - 1) if len(srt) > 1 else np.zeros(len(grid), int)
+    near = np.minimum(np.abs(grid - srt[j]), np.abs(grid - srt[np.maximum(j - 1, 0)]))
+    ok = (wsum >= min_weight) & (near <= sigma_m)     # supported, and not beyond the data
     if ok.sum() < 2:
         return None
     off = (w[ok] @ d) / wsum[ok]
