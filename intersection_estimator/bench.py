@@ -3,6 +3,8 @@
 ``--family`` (issue 15): ``table1`` -- our simulator (paper Table I; ``--empty-lanes P``
 leaves each lane without traffic with probability P, measured separately); ``sumo`` --
 SUMO traffic on generated and inD junctions (:mod:`intersection_estimator.scenarios.sumo`);
+``sumo_road`` -- the same junctions with through traffic on the main road only (the data
+show a road: ``road_no_intersection_rate``);
 ``av2`` -- the Argoverse 2 scenarios in ``../shared/realdata/av2`` (case ``i`` = the
 ``i``-th, ``--n`` at most their number).
 
@@ -66,7 +68,7 @@ class BenchOptions:
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
 
 
-FAMILIES = ('table1', 'sumo', 'av2')
+FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')
 
 
 def make_case(opts: BenchOptions, i: int):
@@ -74,9 +76,10 @@ def make_case(opts: BenchOptions, i: int):
     from .scenarios import gt_doc
     if opts.family == 'table1':
         sc = simulate_scenario(opts.seed + i, SimConfig(empty_lane_prob=opts.empty_lanes))
-    elif opts.family == 'sumo':
+    elif opts.family in ('sumo', 'sumo_road'):
         from .scenarios.sumo import sumo_scenario
-        sc = sumo_scenario(opts.seed + i)
+        from .scenarios.sumo_config import SumoConfig
+        sc = sumo_scenario(opts.seed + i, SumoConfig(road_only=opts.family == 'sumo_road'))
     elif opts.family == 'av2':
         from .realdata.av2 import find_scenarios, load_av2
         from .scenarios.sumo_net import realdata_dir
@@ -229,9 +232,9 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
 
 
 def _family_config(family: str) -> dict:
-    if family == 'sumo':
+    if family in ('sumo', 'sumo_road'):
         from .scenarios.sumo_config import SumoConfig
-        return SumoConfig().to_dict()
+        return SumoConfig(road_only=family == 'sumo_road').to_dict()
     return {}
 
 
@@ -287,6 +290,8 @@ def format_table(result: dict) -> str:
         ('total time median / p95 [ms]',
          f"{_fmt(s['total_ms_median'], 'ms')} / {_fmt(s['total_ms_p95'], 'ms')}",
          paper('total_ms_median', 'ms') + ' (mean)'),
+        ('road cases: no intersection reported',
+         f"{_fmt(s.get('road_no_intersection_rate'), 'pct')} of {s.get('road_cases', 0)}", ''),
         ('failed cases', f"{s['n_failed']} / {s['n']}", ''),
     ]
     head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}  n={cfg['n']}  "
@@ -355,6 +360,7 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--n', type=int, default=1000, help='number of intersections')
     p.add_argument('--family', choices=FAMILIES, default='table1',
                    help='table1: our simulator; sumo: SUMO on generated + inD junctions; '
+                   'sumo_road: those with main-road through traffic only; '
                    'av2: the Argoverse 2 scenarios in ../shared/realdata/av2')
     p.add_argument('--empty-lanes', type=float, default=0.0, metavar='P',
                    help='table1: leave each lane without traffic with probability P')

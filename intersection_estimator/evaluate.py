@@ -21,6 +21,9 @@ Per case (:func:`evaluate`):
   matched, and per matched arm ``used <= estimated <= true`` lanes in and out (a curb
   lane no vehicle drove may be missing, an extra lane may not). The strict
   ``topology_correct`` stays beside it;
+* observability: ``road_case`` -- the traffic used at most two arms of the truth (the data
+  show a road, not an intersection); ``intersection_reported`` -- the estimate has three
+  or more arms. Over road cases, :func:`aggregate` gives ``road_no_intersection_rate``;
 * traffic-following floor: where the ground truth carries a ``traffic_line`` per lane
   (the line that follows the traffic on that lane, see
   :mod:`intersection_estimator.scenarios.floor`), ``floor_cm`` is its mean orthogonal
@@ -290,7 +293,8 @@ def _failed(reason, n_arms_true=None, gt_lanes=None) -> dict:
     traffic = sum(g['traffic'] > 0 for g in gt_lanes) if gt_lanes is not None else None
     return {'ok': False, 'reason': reason, 'n_arms_true': n_arms_true, 'n_arms_est': None,
             'arm_correct': False, 'topology_correct': False, 'topology_observed_correct': False,
-            'arms_true_used': None, 'floor_cm': None, 'floor_cm_sum': 0.0, 'floor_lanes': 0,
+            'arms_true_used': None, 'road_case': None, 'intersection_reported': False,
+            'floor_cm': None, 'floor_cm_sum': 0.0, 'floor_lanes': 0,
             'floor_cm_matched': None, 'floor_cm_matched_sum': 0.0, 'floor_lanes_matched': 0,
             'used_lanes_per_arm': None, 'center_error_m': None,
             'angle_error_deg': None, 'arms_matched': 0, 'angle_error_deg_sum': 0.0,
@@ -329,6 +333,8 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
             'arm_correct': arm_correct, 'topology_correct': topo,
             'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
             'arms_true_used': int(np.count_nonzero(used_in + used_out)),
+            'road_case': bool(np.count_nonzero(used_in + used_out) <= 2),
+            'intersection_reported': len(ea) >= 3,
             'used_lanes_per_arm': [[int(a), int(b)] for a, b in zip(used_in, used_out)],
             **_floor_summary(floor, match),
             'center_error_m': float(np.linalg.norm(ec - gc)),
@@ -428,6 +434,7 @@ def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
         return sum(m.get(key) or 0 for m in metrics)
 
     center = [m['center_error_m'] for m in ok]
+    roads = [m for m in metrics if m.get('road_case')]
     timings = timings or []
     summary = {
         'n': n, 'n_failed': n - len(ok),
@@ -435,6 +442,9 @@ def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
         'topology_accuracy': _ratio(sum(m['topology_correct'] for m in metrics), n),
         'topology_observed_accuracy': _ratio(
             sum(m.get('topology_observed_correct', False) for m in metrics), n),
+        'road_cases': len(roads),
+        'road_no_intersection_rate': _ratio(sum(not m['intersection_reported'] for m in roads),
+                                            len(roads)),
         'center_error_m_mean': float(np.mean(center)) if center else None,
         'center_error_m_median': float(np.median(center)) if center else None,
         'angle_error_deg_mean': _ratio(total('angle_error_deg_sum'), total('arms_matched')),

@@ -98,3 +98,21 @@ def test_floor_is_the_distance_of_the_traffic_line(gt):
     assert s['floor_cm_mean_leaving'] is None
     assert s['topology_observed_accuracy'] == 1.0
     assert evaluate(gt, gt)['floor_cm'] is None   # no traffic lines: no floor
+
+
+def test_road_case_and_intersection_reported(gt):
+    truth = copy.deepcopy(gt)
+    keep = {0, 1}
+    for x in truth['lanes']:
+        if x['arm'] not in keep or (x['kind'] == 'connector' and x['arm_to'] not in keep):
+            x['traffic'] = 0
+    full = evaluate(gt, truth)
+    assert full['road_case'] and full['intersection_reported']
+    road = copy.deepcopy(gt)
+    road['arms'] = road['arms'][:2]
+    road['lanes'] = []
+    m = evaluate(road, truth)
+    assert m['road_case'] and not m['intersection_reported']
+    s = aggregate([full, m, evaluate(gt, gt)])
+    assert s['road_cases'] == 2 and s['road_no_intersection_rate'] == 0.5
+    assert not evaluate(gt, gt)['road_case']

@@ -36,7 +36,7 @@ from .sumo_gt import net_gt, read_net
 from .sumo_net import generate_net, ind_net
 from .sumo_run import read_fcd, run_sumo
 
-__all__ = ['sumo_scenario', 'LABEL_OF']
+__all__ = ['sumo_scenario', 'main_road', 'LABEL_OF']
 
 LABEL_OF = {'car': 1, 'truck': 2, 'bike': 6, 'person': 7, 'parked': 1}
 LANE_USERS = ('car', 'truck')
@@ -91,9 +91,34 @@ def _parked(g, gt, cfg: SumoConfig, n_cyc: int, rate: float, id0: int) -> list[T
     return out
 
 
-def _ego_choice(g, net, gt):
-    """(sumolib lane at the stop line of a random entering lanelet, a sink edge)."""
-    entering = sorted((ll for ll in gt.lanelets if ll.kind == 'entering'), key=lambda x: x.id)
+def main_road(gt) -> tuple[int, int]:
+    """The two arms closest to opposite (with entering and leaving lanes): the main road."""
+    arms = gt.intersection.arms
+    ok = [i for i, a in enumerate(arms) if a.lanes_in and a.lanes_out]
+    pairs = [(abs(math.remainder(arms[i].angle - arms[j].angle, 2 * math.pi)), i, j)
+             for i in ok for j in ok if i < j]
+    if not pairs:
+        raise ValueError('no two arms with lanes both ways: no main road')
+    _, i, j = max(pairs)
+    return i, j
+
+
+def _road_pairs(net, gt):
+    """(source, sink) pairs of the through traffic on the main road (road-only cases)."""
+    from .sumo_demand import through_pairs
+    i, j = main_road(gt)
+
+    def edge_of(kind, arm, end):
+        ll = next(x for x in gt.lanelets if x.kind == kind and x.arm == arm)
+        return net.getLane(gt.segments_of[ll.id][end]).getEdge().getID()
+    return through_pairs(net, (edge_of('entering', i, 0), edge_of('entering', j, 0)),
+                         (edge_of('leaving', i, -1), edge_of('leaving', j, -1)))
+
+
+def _ego_choice(g, net, gt, arms=None):
+    """(sumolib lane at the stop line of a random entering lanelet (of ``arms``), a sink edge)."""
+    entering = sorted((ll for ll in gt.lanelets if ll.kind == 'entering'
+                       and (arms is None or ll.arm in arms)), key=lambda x: x.id)
     ll = entering[int(g.integers(len(entering)))]
     lane = net.getLane(gt.segments_of[ll.id][-1])
     _, sinks = sources_sinks(net)
@@ -136,9 +161,10 @@ def sumo_scenario(seed: int, cfg: SumoConfig = SumoConfig(), sim: SimConfig = Si
         gt, _, junction = net_gt(net, junction, arm_length=cfg.gt_arm_length_m)
         duration = float(g_time.uniform(*cfg.duration))
         end = cfg.warmup_s + duration
-        ego_ll, ego_lane, sink = _ego_choice(g_time, net, gt)
+        only = _road_pairs(net, gt) if cfg.road_only else None
+        ego_ll, ego_lane, sink = _ego_choice(g_time, net, gt, main_road(gt) if only else None)
         depart = cfg.warmup_s - 6.0 + float(g_time.uniform(0.0, 0.3)) * duration
-        routes = write_routes(g_dem, net, cfg, folder, ego_lane, sink, depart, end)
+        routes = write_routes(g_dem, net, cfg, folder, ego_lane, sink, depart, end, only)
         fcd_path = run_sumo(net_path, routes, folder, seed=int(g_sumo.integers(2 ** 31)), end=end,
                             step=cfg.step_s, record_from=cfg.warmup_s)
         fcd = read_fcd(fcd_path, cfg.warmup_s, duration, cfg.step_s)
@@ -158,6 +184,7 @@ def sumo_scenario(seed: int, cfg: SumoConfig = SumoConfig(), sim: SimConfig = Si
                         sensor_range=scene_sensor_range(ego, gt.lanelets, sim), labels=labels)
     _traffic(sc, others, gt, id_of)
     sc.info = {'source': 'sumo', **info, 'junction': junction, 'sumo': 'eclipse-sumo 1.28.0',
+               'road_only': bool(cfg.road_only),
                'vehicles': sum(f.kind in LANE_USERS for f in others),
                'cyclists': sum(f.kind == 'bike' for f in others),
                'pedestrians': sum(f.kind == 'person' for f in others),

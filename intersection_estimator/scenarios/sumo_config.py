@@ -42,6 +42,8 @@ class SumoConfig:
     truck_share: float = 0.05
     pedestrians_per_h: tuple[float, float] = (0.0, 600.0)
     parked: tuple[int, int] = (0, 6)                # parked cars at the kerb
+    road_only: bool = False                         # only through traffic on the main road
+                                                    # (observability: the data show a road)
     # --- time ------------------------------------------------------------------------------
     warmup_s: float = 30.0                          # traffic builds up (queues) first
     duration: tuple[float, float] = (30.0, 45.0)    # recorded window [s]

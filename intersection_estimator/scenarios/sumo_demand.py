@@ -19,7 +19,7 @@ import numpy as np
 
 from .sumo_config import SumoConfig
 
-__all__ = ['sources_sinks', 'write_routes', 'EGO_ID']
+__all__ = ['sources_sinks', 'write_routes', 'through_pairs', 'EGO_ID']
 
 EGO_ID = 'ego'
 
@@ -55,13 +55,18 @@ def _vtypes(cfg: SumoConfig) -> str:
             '  <vType id="egotype" vClass="passenger"/>\n')
 
 
-def _flows(rng, net, cfg: SumoConfig, end: float) -> list[str]:
+def _flows(rng, net, cfg: SumoConfig, end: float, only=None) -> list[str]:
+    """Flows of every source -> sink relation (``only``: just these (source, sink) pairs,
+    none left empty)."""
     src, snk = sources_sinks(net)
     out = []
     for s in src:
         a = net.getEdge(s).getFromNode()
         for t in snk:
-            if net.getEdge(t).getToNode() == a or rng.uniform() < cfg.zero_route_prob:
+            if only is not None:
+                if (s, t) not in only:
+                    continue
+            elif net.getEdge(t).getToNode() == a or rng.uniform() < cfg.zero_route_prob:
                 continue
             vph = float(rng.uniform(*cfg.route_vph))
             out.append(f'  <flow id="f_{s}_{t}" type="mix" from="{s}" to="{t}" begin="0" '
@@ -95,11 +100,35 @@ def _ego(lane, sink: str, depart: float, stop_gap: float) -> str:
             '  </trip>')
 
 
+def through_pairs(net, in_edges: tuple, out_edges: tuple) -> set:
+    """(source, sink) pairs of the through traffic between two arms: for arm entering edge
+    ``in_edges[i]`` the source nearest upstream, for leaving edge ``out_edges[1 - i]`` the
+    sink nearest downstream."""
+    src, snk = sources_sinks(net)
+
+    def nearest(cands, a, b_of):
+        best = []
+        for c in cands:
+            path, cost = net.getShortestPath(*b_of(c, a))
+            if path is not None:
+                best.append((cost, c))
+        return min(best)[1] if best else None
+    pairs = set()
+    for i in (0, 1):
+        s = nearest(src, net.getEdge(in_edges[i]), lambda c, a: (net.getEdge(c), a))
+        t = nearest(snk, net.getEdge(out_edges[1 - i]), lambda c, a: (a, net.getEdge(c)))
+        if s is not None and t is not None:
+            pairs.add((s, t))
+    return pairs
+
+
 def write_routes(rng, net, cfg: SumoConfig, folder, ego_lane, ego_sink: str, depart: float,
-                 end: float) -> Path:
+                 end: float, only=None) -> Path:
     """``routes.rou.xml``: vehicle types, flows, pedestrians and the ego trip (sorted by
-    departure, as SUMO wants)."""
-    body = _flows(rng, net, cfg, end) + _persons(rng, net, cfg, end)
+    departure, as SUMO wants). ``only``: (source, sink) pairs -- a road case (all traffic
+    on one axis, no pedestrians)."""
+    body = _flows(rng, net, cfg, end, only) + ([] if only is not None else
+                                               _persons(rng, net, cfg, end))
     ego = _ego(ego_lane, ego_sink, depart, float(rng.uniform(2.0, 6.0)))
     path = Path(folder) / 'routes.rou.xml'
     path.write_text('<routes>\n' + _vtypes(cfg) + '\n'.join(body + [ego]) + '\n</routes>\n')

@@ -76,3 +76,12 @@ def test_ind_networks_give_a_junction(k):
     assert 3 <= len(gt.intersection.arms) <= 4
     assert all(a.lanes_in + a.lanes_out >= 1 for a in gt.intersection.arms)
     assert sum(ll.kind == 'connector' for ll in gt.lanelets) >= 5
+
+
+def test_road_only_case_shows_a_road(tmp_path):
+    sc = sumo_scenario(5, SumoConfig(ind_share=0.0, duration=(20.0, 20.0), warmup_s=25.0,
+                                     road_only=True), workdir=tmp_path)
+    doc = gt_doc(sc, arrays=True)
+    m = evaluate(doc, doc)
+    assert m['road_case'] and m['arms_true_used'] == 2 and len(sc.gt.arms) >= 3
+    assert sc.info['pedestrians'] == 0 and sc.info['vehicles'] > 0
