@@ -39,6 +39,7 @@ from .evaluate import aggregate, evaluate
 from .sim import MODES, SimConfig, simulate_scenario
 
 __all__ = ['BenchOptions', 'run_bench', 'run_case', 'format_table', 'PAPER', 'register',
+           'merge_results', 'make_case', 'FAMILIES',
            'package_version', 'machine_info']
 
 #: Paper figures (§IV, i7-8750H, C++) per mode; 'raw' also stands for 'heading'.
@@ -238,6 +239,25 @@ def _family_config(family: str) -> dict:
     return {}
 
 
+def merge_results(results: list[dict]) -> dict:
+    """One bench result from several runs of the same family / mode (chunks of seeds):
+    cases concatenated in seed order, summary re-pooled with :func:`aggregate`."""
+    if not results:
+        raise ValueError('nothing to merge')
+    keys = {(r['config'].get('family', 'table1'), r['config']['mode']) for r in results}
+    if len(keys) != 1:
+        raise ValueError(f'cannot merge runs of different family / mode: {sorted(keys)}')
+    cases = sorted((c for r in results for c in r['cases']), key=lambda c: c['seed'])
+    seeds = [c['seed'] for c in cases]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError('the runs share seeds')
+    config = {**results[0]['config'], 'n': len(cases), 'seed': min(seeds),
+              'merged_from': [[r['config']['seed'], r['config']['n']] for r in results],
+              'wall_s': sum(r['config'].get('wall_s', 0.0) for r in results)}
+    summary = aggregate([c['metrics'] for c in cases], [c['timing_ms'] for c in cases])
+    return {'config': config, 'summary': summary, 'cases': cases}
+
+
 # ---------------------------------------------------------------- table
 def _fmt(v, kind):
     if v is None:
@@ -317,7 +337,23 @@ def is_perfect(summary: dict) -> bool:
 
 
 # ---------------------------------------------------------------- CLI
+def _merge_cmd(args) -> int:
+    import json
+    try:
+        result = merge_results([json.loads(Path(f).read_text()) for f in args.merge])
+    except (OSError, ValueError, KeyError) as e:
+        print(f'bench --merge: {e}', file=sys.stderr)
+        return 2
+    print(format_table(result))
+    if args.json:
+        Path(args.json).write_text(dumps(result))
+        print(f'wrote {args.json}')
+    return 0
+
+
 def _cmd(args) -> int:
+    if args.merge:
+        return _merge_cmd(args)
     if not 0.0 <= args.empty_lanes < 1.0:
         print(f'bench: --empty-lanes {args.empty_lanes} not in [0, 1)', file=sys.stderr)
         return 2
@@ -373,6 +409,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--json', metavar='OUT', help='write config, summary and all cases')
     p.add_argument('--oracle', action='store_true',
                    help='score the ground truth itself (sanity: must be perfect)')
+    p.add_argument('--merge', nargs='+', metavar='JSON',
+                   help='merge bench JSON files of one family / mode (chunks of seeds) '
+                   'and print their pooled table (no cases run)')
     p.add_argument('--no-warmup', action='store_true',
                    help='time the first case cold (imports / JIT compilation included)')
     p.set_defaults(func=_cmd)

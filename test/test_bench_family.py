@@ -54,3 +54,20 @@ def test_table1_lanes_without_traffic_option():
     res = run_bench(BenchOptions(n=3, oracle=True, empty_lanes=0.3))
     assert is_perfect(res['summary'])
     assert res['config']['sim_config']['empty_lane_prob'] == 0.3
+
+
+def test_merge_pools_chunks(tmp_path, capsys):
+    import json
+    a = tmp_path / 'a.json'
+    b = tmp_path / 'b.json'
+    assert _cli(['bench', '--n', '2', '--oracle', '--seed', '0', '--json', str(a)]) == 0
+    assert _cli(['bench', '--n', '3', '--oracle', '--seed', '2', '--json', str(b)]) == 0
+    out = tmp_path / 'm.json'
+    assert _cli(['bench', '--merge', str(a), str(b), '--json', str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc['config']['n'] == 5 and [c['seed'] for c in doc['cases']] == [0, 1, 2, 3, 4]
+    whole = run_bench(BenchOptions(n=5, oracle=True))
+    assert doc['summary']['lane_error_cm_mean'] == pytest.approx(whole['summary']['lane_error_cm_mean'],
+                                                                 abs=1e-3)
+    assert _cli(['bench', '--merge', str(a), str(a)]) == 2      # shared seeds
+    assert 'share seeds' in capsys.readouterr().err
