@@ -70,13 +70,19 @@ class BenchOptions:
 
 
 FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')
+_SCENARIO_FIELDS = ('seed', 'config', 'gt', 'gt_lanelets', 'traffic', 'tracks', 'ego', 'duration',
+                    'stop', 'sensor_range', 'sensors')
 
 
 def make_case(opts: BenchOptions, i: int):
     """(scenario, gt dict) of case ``i`` of the family."""
     from .scenarios import gt_doc
     if opts.family == 'table1':
+        from .scenarios.base import FamilyScenario
+        from .scenarios.floor import scene_traffic_lines
         sc = simulate_scenario(opts.seed + i, SimConfig(empty_lane_prob=opts.empty_lanes))
+        sc = FamilyScenario(**{f: getattr(sc, f) for f in _SCENARIO_FIELDS})
+        sc.extra_gt = scene_traffic_lines(sc)         # the floor of the case
     elif opts.family in ('sumo', 'sumo_road'):
         from .scenarios.sumo import sumo_scenario
         from .scenarios.sumo_config import SumoConfig

@@ -53,6 +53,7 @@ def test_table1_lanes_without_traffic_option():
     assert 0.15 < empty[0] / empty[1] < 0.6
     res = run_bench(BenchOptions(n=3, oracle=True, empty_lanes=0.3))
     assert is_perfect(res['summary'])
+    assert res['summary']['floor_cm_mean'] > 0        # table1 cases carry their floor too
     assert res['config']['sim_config']['empty_lane_prob'] == 0.3
 
 

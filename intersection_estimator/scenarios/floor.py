@@ -162,3 +162,31 @@ def match_segments(xy: np.ndarray, heading: np.ndarray, segs: dict, *, gate_m: f
         best[near[ok]] = np.abs(d[ok])
         out[near[ok]] = sid
     return out.astype(str)
+
+
+def route_labels(dets, tracks, lanelets) -> np.ndarray:
+    """Lanelet id per detection of a simulated scene whose tracks know their route
+    (Table I simulator): the nearest lanelet of the track's route; '' for false tracks."""
+    by_id = {ll.id: ll for ll in lanelets}
+    route = {tr.id: [r for r in tr.route if r in by_id] for tr in tracks}
+    out = np.full(len(dets), '', dtype=object)
+    for tid, lanes in route.items():
+        rows = np.flatnonzero(dets.track_id == tid)
+        if len(rows) == 0 or not lanes:
+            continue
+        dist = np.full((len(lanes), len(rows)), np.inf)
+        for k, lid in enumerate(lanes):
+            _, d, inside = project(dets.xy[rows], by_id[lid].center)
+            dist[k] = np.where(inside, np.abs(d), np.inf)
+        best = dist.argmin(0)
+        ok = np.isfinite(dist.min(0))
+        out[rows[ok]] = np.array(lanes, dtype=object)[best[ok]]
+    return out.astype(str)
+
+
+def scene_traffic_lines(sc, mode: str = 'tracked') -> dict:
+    """{lanelet id: {'traffic_line': line}} of a Table I scene from its tracked detections."""
+    dets = sc.detections(mode)
+    labels = route_labels(dets, sc.tracks, sc.gt_lanelets)
+    return {lid: {'traffic_line': line}
+            for lid, line in traffic_lines(sc.gt_lanelets, dets.xy, labels).items()}

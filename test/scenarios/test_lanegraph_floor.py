@@ -99,3 +99,15 @@ def test_map_matching_needs_distance_and_heading():
     hd = np.array([math.pi, 0.0, math.pi])    # along eI (westward), against it, too far
     m = match_segments(xy, hd, segs)
     assert list(m) == ['eI', '', '']
+
+
+def test_route_labels_of_a_table1_scene():
+    from intersection_estimator.scenarios.floor import route_labels
+    from intersection_estimator.sim import simulate_scenario
+    sc = simulate_scenario(4)
+    d = sc.detections('tracked')
+    lab = route_labels(d, sc.tracks, sc.gt_lanelets)
+    real = d.track_id < 1_000_000
+    assert (lab[~real] == '').all() and (lab[real] != '').mean() > 0.9
+    routes = {tr.id: set(tr.route) for tr in sc.tracks}
+    assert all(lid in routes[int(t)] for lid, t in zip(lab[real], d.track_id[real]) if lid)
