@@ -155,10 +155,17 @@ def _warm_up(estimator, opts: BenchOptions) -> None:
 
 
 def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
-    """Simulate, estimate (or oracle), evaluate case ``i``; never raises for estimator errors."""
+    """Simulate, estimate (or oracle), evaluate case ``i``; never raises for estimator
+    errors, and a case the family cannot make (a SUMO tool failing) is a failed case."""
     seed = opts.seed + i
     t0 = time.perf_counter()
-    sc, gt = make_case(opts, i)
+    try:
+        sc, gt = make_case(opts, i)
+    except Exception as e:  # noqa: BLE001 - one bad case must not stop a benchmark
+        from .evaluate import failed_case
+        metrics = failed_case(f'case not made: {type(e).__name__}: {e}')
+        return {'seed': seed, 'true': None, 'estimate': None, 'metrics': metrics,
+                'timing_ms': {'simulate': 1e3 * (time.perf_counter() - t0)}}
     sim_ms = 1e3 * (time.perf_counter() - t0)
     tb = None
     if opts.oracle:

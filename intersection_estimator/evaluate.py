@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-__all__ = ['evaluate', 'evaluate_files', 'aggregate', 'SUMMARY_KEYS', 'GATE_M', 'RESAMPLE_M', 'register',
+__all__ = ['evaluate', 'evaluate_files', 'aggregate', 'failed_case', 'SUMMARY_KEYS', 'GATE_M', 'RESAMPLE_M', 'register',
            'format_metrics']
 
 GATE_M = 1.5
@@ -304,6 +304,11 @@ def _failed(reason, n_arms_true=None, gt_lanes=None) -> dict:
             'lane_recall': 0.0 if traffic else None, 'lane_precision': None,
             'connectors_matched': 0, 'connectors_connected': 0, 'connectivity_recall': None,
             'by_kind': None}
+
+
+def failed_case(reason: str) -> dict:
+    """Metrics of a case that could not be scored (all counts zero, ``ok`` False)."""
+    return _failed(reason)
 
 
 def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:

@@ -72,3 +72,12 @@ def test_merge_pools_chunks(tmp_path, capsys):
                                                                  abs=1e-3)
     assert _cli(['bench', '--merge', str(a), str(a)]) == 2      # shared seeds
     assert 'share seeds' in capsys.readouterr().err
+
+
+def test_a_case_the_family_cannot_make_is_a_failed_case(monkeypatch):
+    def broken(opts, i):
+        raise RuntimeError('netconvert failed (1): boom')
+    monkeypatch.setattr(bench, 'make_case', broken)
+    res = run_bench(BenchOptions(n=2, family='sumo', oracle=True))
+    assert res['summary']['n_failed'] == 2
+    assert 'case not made: RuntimeError: netconvert failed' in res['cases'][0]['metrics']['reason']
