@@ -1,6 +1,14 @@
-"""Synthetic benchmark after the paper's Table I / §IV (issue 4, DESIGN.md §5).
+"""Benchmark after the paper's Table I / §IV (issue 4, DESIGN.md §5) on three families.
 
-Case ``i`` simulates scenario ``seed + i`` in-process (no bag IO), runs the estimator
+``--family`` (issue 15): ``table1`` -- our simulator (paper Table I; ``--empty-lanes P``
+leaves each lane without traffic with probability P, measured separately); ``sumo`` --
+SUMO traffic on generated and inD junctions (:mod:`intersection_estimator.scenarios.sumo`);
+``sumo_road`` -- the same junctions with through traffic on the main road only (the data
+show a road: ``road_no_intersection_rate``);
+``av2`` -- the Argoverse 2 scenarios in ``../shared/realdata/av2`` (case ``i`` = the
+``i``-th, ``--n`` at most their number).
+
+Case ``i`` makes scenario ``seed + i`` in-process (no bag IO), runs the estimator
 (``intersection_estimator.pipeline.estimate``) on its detections of ``--mode``, scores
 it with :func:`intersection_estimator.evaluate.evaluate` and pools the cases with
 :func:`~intersection_estimator.evaluate.aggregate`. ``--oracle`` scores the ground
@@ -17,7 +25,7 @@ keep the file small (regenerate them with ``simulate --seed``).
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import multiprocessing as mp
 import os
 from pathlib import Path
@@ -26,11 +34,12 @@ import sys
 import time
 import traceback
 
-from .estimate_io import dumps, estimate_to_dict, gt_to_dict
+from .estimate_io import dumps, estimate_to_dict
 from .evaluate import aggregate, evaluate
 from .sim import MODES, SimConfig, simulate_scenario
 
 __all__ = ['BenchOptions', 'run_bench', 'run_case', 'format_table', 'PAPER', 'register',
+           'merge_results', 'make_case', 'FAMILIES',
            'package_version', 'machine_info']
 
 #: Paper figures (§IV, i7-8750H, C++) per mode; 'raw' also stands for 'heading'.
@@ -57,6 +66,38 @@ class BenchOptions:
     oracle: bool = False
     warmup: bool = True     # one small untimed estimator run per process first
     profile: bool = False   # per case: where the time went (EstimateResult.phases_ms)
+    family: str = 'table1'
+    empty_lanes: float = 0.0   # table1: share of lanes left without traffic
+
+
+FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')
+_SCENARIO_FIELDS = ('seed', 'config', 'gt', 'gt_lanelets', 'traffic', 'tracks', 'ego', 'duration',
+                    'stop', 'sensor_range', 'sensors')
+
+
+def make_case(opts: BenchOptions, i: int):
+    """(scenario, gt dict) of case ``i`` of the family."""
+    from .scenarios import gt_doc
+    if opts.family == 'table1':
+        from .scenarios.base import FamilyScenario
+        from .scenarios.floor import scene_traffic_lines
+        sc = simulate_scenario(opts.seed + i, SimConfig(empty_lane_prob=opts.empty_lanes))
+        sc = FamilyScenario(**{f: getattr(sc, f) for f in _SCENARIO_FIELDS})
+        sc.extra_gt = scene_traffic_lines(sc)         # the floor of the case
+    elif opts.family in ('sumo', 'sumo_road'):
+        from .scenarios.sumo import sumo_scenario
+        from .scenarios.sumo_config import SumoConfig
+        sc = sumo_scenario(opts.seed + i, SumoConfig(road_only=opts.family == 'sumo_road'))
+    elif opts.family == 'av2':
+        from .realdata.av2 import find_scenarios, load_av2
+        from .scenarios.sumo_net import realdata_dir
+        found = find_scenarios(realdata_dir() / 'av2')
+        if i >= len(found):
+            raise ValueError(f'av2: case {i} but only {len(found)} scenarios')
+        sc = load_av2(found[i])
+    else:
+        raise ValueError(f'family {opts.family!r} not in {FAMILIES}')
+    return sc, gt_doc(sc, arrays=True)
 
 
 def package_version() -> str:
@@ -117,11 +158,17 @@ def _warm_up(estimator, opts: BenchOptions) -> None:
 
 
 def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
-    """Simulate, estimate (or oracle), evaluate case ``i``; never raises for estimator errors."""
+    """Simulate, estimate (or oracle), evaluate case ``i``; never raises for estimator
+    errors, and a case the family cannot make (a SUMO tool failing) is a failed case."""
     seed = opts.seed + i
     t0 = time.perf_counter()
-    sc = simulate_scenario(seed, SimConfig())
-    gt = gt_to_dict(sc, arrays=True)
+    try:
+        sc, gt = make_case(opts, i)
+    except Exception as e:  # noqa: BLE001 - one bad case must not stop a benchmark
+        from .evaluate import failed_case
+        metrics = failed_case(f'case not made: {type(e).__name__}: {e}')
+        return {'seed': seed, 'true': None, 'estimate': None, 'metrics': metrics,
+                'timing_ms': {'simulate': 1e3 * (time.perf_counter() - t0)}}
     sim_ms = 1e3 * (time.perf_counter() - t0)
     tb = profile = None
     if opts.oracle:
@@ -176,6 +223,8 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     """
     if opts.mode not in MODES:
         raise ValueError(f'mode {opts.mode!r} not in {MODES}')
+    if opts.family not in FAMILIES:
+        raise ValueError(f'family {opts.family!r} not in {FAMILIES}')
     if estimator is not None and opts.jobs > 1:
         raise ValueError('a custom estimator runs in-process only (jobs=1)')
     bar = _progress(opts.n)
@@ -198,7 +247,8 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     index = _speed_index(meter, cases, summary)
     config = {**asdict(opts), 'estimator': 'oracle (ground truth)' if opts.oracle else
               getattr(estimator, '__module__', 'intersection_estimator.pipeline') + '.estimate',
-              'sim_config': SimConfig().to_dict(), 'package_version': package_version(),
+              'sim_config': SimConfig(empty_lane_prob=opts.empty_lanes).to_dict(),
+              'family_config': _family_config(opts.family), 'package_version': package_version(),
               'machine': machine_info(), 'wall_s': time.perf_counter() - t0,
               'timing_note': ('timing_ms measured inside the worker per case (estimator only, '
                               'simulation excluded, after one untimed warm-up run per '
@@ -228,6 +278,32 @@ def _speed_index(meter, cases, summary) -> dict | None:
     return index
 
 
+def _family_config(family: str) -> dict:
+    if family in ('sumo', 'sumo_road'):
+        from .scenarios.sumo_config import SumoConfig
+        return SumoConfig(road_only=family == 'sumo_road').to_dict()
+    return {}
+
+
+def merge_results(results: list[dict]) -> dict:
+    """One bench result from several runs of the same family / mode (chunks of seeds):
+    cases concatenated in seed order, summary re-pooled with :func:`aggregate`."""
+    if not results:
+        raise ValueError('nothing to merge')
+    keys = {(r['config'].get('family', 'table1'), r['config']['mode']) for r in results}
+    if len(keys) != 1:
+        raise ValueError(f'cannot merge runs of different family / mode: {sorted(keys)}')
+    cases = sorted((c for r in results for c in r['cases']), key=lambda c: c['seed'])
+    seeds = [c['seed'] for c in cases]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError('the runs share seeds')
+    config = {**results[0]['config'], 'n': len(cases), 'seed': min(seeds),
+              'merged_from': [[r['config']['seed'], r['config']['n']] for r in results],
+              'wall_s': sum(r['config'].get('wall_s', 0.0) for r in results)}
+    summary = aggregate([c['metrics'] for c in cases], [c['timing_ms'] for c in cases])
+    return {'config': config, 'summary': summary, 'cases': cases}
+
+
 # ---------------------------------------------------------------- table
 def _fmt(v, kind):
     if v is None:
@@ -248,6 +324,8 @@ def format_table(result: dict) -> str:
         ('arm accuracy', _fmt(s['arm_accuracy'], 'pct'), paper('arm_accuracy', 'pct')),
         ('lane-level topology accuracy', _fmt(s['topology_accuracy'], 'pct'),
          paper('topology_accuracy', 'pct')),
+        ('topology_observed (lanes with traffic)', _fmt(s.get('topology_observed_accuracy'), 'pct'),
+         ''),
         ('center error mean / median [m]',
          f"{_fmt(s['center_error_m_mean'], 'm')} / {_fmt(s['center_error_m_median'], 'm')}",
          '~' + paper('center_error_m_mean', 'm') + ' (Fig. 4)'),
@@ -255,6 +333,11 @@ def format_table(result: dict) -> str:
          paper('angle_error_deg_mean', 'deg')),
         ('lane course error mean [cm]', _fmt(s['lane_error_cm_mean'], 'cm'),
          paper('lane_error_cm_mean', 'cm')),
+        ('traffic-following floor (all / matched) [cm]',
+         f"{_fmt(s.get('floor_cm_mean'), 'cm')} / {_fmt(s.get('floor_cm_matched_mean'), 'cm')}", ''),
+        ('  floor entering / leaving / connector [cm]',
+         ' / '.join(_fmt(s.get(f'floor_cm_mean_{k}'), 'cm')
+                    for k in ('entering', 'leaving', 'connector')), ''),
         ('lane error entering / leaving / connector [cm]',
          ' / '.join(_fmt(s.get(f'lane_error_cm_mean_{k}'), 'cm')
                     for k in ('entering', 'leaving', 'connector')), ''),
@@ -269,9 +352,12 @@ def format_table(result: dict) -> str:
         (f"lane course time median / p95 [ms] @{cfg['lane_samples']}", _times(s, 'lanes'),
          paper('lanes_ms_median', 'ms') + ' (mean @20000)'),
         ('total time median / p95 [ms]', _times(s, 'total'), paper('total_ms_median', 'ms') + ' (mean)'),
+        ('road cases: no intersection reported',
+         f"{_fmt(s.get('road_no_intersection_rate'), 'pct')} of {s.get('road_cases', 0)}", ''),
         ('failed cases', f"{s['n_failed']} / {s['n']}", ''),
     ]
-    head = (f"bench  mode={cfg['mode']}  n={cfg['n']}  seed={cfg['seed']}  jobs={cfg['jobs']}  "
+    head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}  n={cfg['n']}  "
+            f"seed={cfg['seed']}  jobs={cfg['jobs']}  "
             f"estimator={cfg['estimator']}")
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows + [('', 'ours', '')])
@@ -305,17 +391,48 @@ def is_perfect(summary: dict) -> bool:
 
 
 # ---------------------------------------------------------------- CLI
+def _merge_cmd(args) -> int:
+    import json
+    try:
+        result = merge_results([json.loads(Path(f).read_text()) for f in args.merge])
+    except (OSError, ValueError, KeyError) as e:
+        print(f'bench --merge: {e}', file=sys.stderr)
+        return 2
+    print(format_table(result))
+    if args.json:
+        Path(args.json).write_text(dumps(result))
+        print(f'wrote {args.json}')
+    return 0
+
+
 def _cmd(args) -> int:
+    if args.merge:
+        return _merge_cmd(args)
+    if not 0.0 <= args.empty_lanes < 1.0:
+        print(f'bench: --empty-lanes {args.empty_lanes} not in [0, 1)', file=sys.stderr)
+        return 2
+    if args.empty_lanes and args.family != 'table1':
+        print('bench: --empty-lanes applies to --family table1 only', file=sys.stderr)
+        return 2
     opts = BenchOptions(n=args.n, mode=args.mode, samples=args.samples,
                         lane_samples=args.lane_samples, seed=args.seed, jobs=args.jobs,
                         oracle=args.oracle, warmup=not args.no_warmup,
-                        profile=getattr(args, 'profile', False))
+                        profile=getattr(args, 'profile', False), family=args.family,
+                        empty_lanes=args.empty_lanes)
     if not opts.oracle:
         try:
             _load_estimator()
         except ImportError as e:
             print(f'bench: estimator not available ({e}); use --oracle', file=sys.stderr)
             return 2
+    if opts.family == 'av2':
+        from .realdata.av2 import find_scenarios
+        from .scenarios.sumo_net import realdata_dir
+        have = len(find_scenarios(realdata_dir() / 'av2'))
+        if have == 0:
+            print(f"bench: no AV2 scenarios under {realdata_dir() / 'av2'}", file=sys.stderr)
+            return 2
+        opts = replace(opts, n=min(opts.n, have))
     result = run_bench(opts)
     print(format_table(result))
     if 'profile' in result:
@@ -332,10 +449,16 @@ def _cmd(args) -> int:
 
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``bench`` subcommand."""
-    p = subparsers.add_parser('bench', help='synthetic benchmark (paper Table I)',
+    p = subparsers.add_parser('bench', help='benchmark (paper Table I, SUMO, AV2)',
                               description=__doc__.split('\n\n')[0])
     from .cli import int_at_least
     p.add_argument('--n', type=int_at_least(1), default=1000, help='number of intersections')
+    p.add_argument('--family', choices=FAMILIES, default='table1',
+                   help='table1: our simulator; sumo: SUMO on generated + inD junctions; '
+                   'sumo_road: those with main-road through traffic only; '
+                   'av2: the Argoverse 2 scenarios in ../shared/realdata/av2')
+    p.add_argument('--empty-lanes', type=float, default=0.0, metavar='P',
+                   help='table1: leave each lane without traffic with probability P')
     p.add_argument('--mode', choices=MODES, default='tracked', help='detection input')
     p.add_argument('--samples', type=int, default=5000, help='topology MCMC samples')
     p.add_argument('--lane-samples', type=int, default=20000,
@@ -347,6 +470,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help='score the ground truth itself (sanity: must be perfect)')
     p.add_argument('--profile', action='store_true',
                    help='per case and phase: where the time goes (table, and "profile" in --json)')
+    p.add_argument('--merge', nargs='+', metavar='JSON',
+                   help='merge bench JSON files of one family / mode (chunks of seeds) '
+                   'and print their pooled table (no cases run)')
     p.add_argument('--no-warmup', action='store_true',
                    help='time the first case cold (imports / JIT compilation included)')
     p.set_defaults(func=_cmd)

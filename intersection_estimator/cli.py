@@ -21,6 +21,7 @@ SUBCOMMANDS = (
     'intersection_estimator.bench',        # bench
     'intersection_estimator.soak',         # soak
     'intersection_estimator.fleet.cli',    # fleet
+    'intersection_estimator.realdata.av2', # av2
 )
 
 
