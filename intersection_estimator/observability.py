@@ -40,7 +40,8 @@ ROAD, INTERSECTION, NO_DATA = 'ROAD', 'INTERSECTION', 'NO_DATA'
 
 _RANGES = {
     'axis_tol_deg': (1.0, 89.0, 'heading farther than this from the axis is off-axis [deg]'),
-    'corridor_m': (1.0, 200.0, 'radar: detections farther than this beside the axis are off-axis [m]'),
+    'corridor_m': (1.0, 200.0,
+                   'radar: detections farther than this beside the axis are off-axis [m]'),
     'ridge_bin_m': (1.0, 200.0, 'radar: bin length of the road ridge along the axis [m]'),
     'min_extent_m': (0.0, 500.0, 'shortest off-axis stretch of one passage that counts [m]'),
     'min_speed': (0.0, 50.0, 'slower detections (speed or |Doppler|) are not traffic [m/s]'),
