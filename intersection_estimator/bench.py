@@ -1,6 +1,12 @@
-"""Synthetic benchmark after the paper's Table I / §IV (issue 4, DESIGN.md §5).
+"""Benchmark after the paper's Table I / §IV (issue 4, DESIGN.md §5) on three families.
 
-Case ``i`` simulates scenario ``seed + i`` in-process (no bag IO), runs the estimator
+``--family`` (issue 15): ``table1`` -- our simulator (paper Table I; ``--empty-lanes P``
+leaves each lane without traffic with probability P, measured separately); ``sumo`` --
+SUMO traffic on generated and inD junctions (:mod:`intersection_estimator.scenarios.sumo`);
+``av2`` -- the Argoverse 2 scenarios in ``../shared/realdata/av2`` (case ``i`` = the
+``i``-th, ``--n`` at most their number).
+
+Case ``i`` makes scenario ``seed + i`` in-process (no bag IO), runs the estimator
 (``intersection_estimator.pipeline.estimate``) on its detections of ``--mode``, scores
 it with :func:`intersection_estimator.evaluate.evaluate` and pools the cases with
 :func:`~intersection_estimator.evaluate.aggregate`. ``--oracle`` scores the ground
@@ -17,7 +23,7 @@ keep the file small (regenerate them with ``simulate --seed``).
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import multiprocessing as mp
 import os
 from pathlib import Path
@@ -26,7 +32,7 @@ import sys
 import time
 import traceback
 
-from .estimate_io import dumps, estimate_to_dict, gt_to_dict
+from .estimate_io import dumps, estimate_to_dict
 from .evaluate import aggregate, evaluate
 from .sim import MODES, SimConfig, simulate_scenario
 
@@ -56,6 +62,31 @@ class BenchOptions:
     jobs: int = 1
     oracle: bool = False
     warmup: bool = True     # one small untimed estimator run per process first
+    family: str = 'table1'
+    empty_lanes: float = 0.0   # table1: share of lanes left without traffic
+
+
+FAMILIES = ('table1', 'sumo', 'av2')
+
+
+def make_case(opts: BenchOptions, i: int):
+    """(scenario, gt dict) of case ``i`` of the family."""
+    from .scenarios import gt_doc
+    if opts.family == 'table1':
+        sc = simulate_scenario(opts.seed + i, SimConfig(empty_lane_prob=opts.empty_lanes))
+    elif opts.family == 'sumo':
+        from .scenarios.sumo import sumo_scenario
+        sc = sumo_scenario(opts.seed + i)
+    elif opts.family == 'av2':
+        from .realdata.av2 import find_scenarios, load_av2
+        from .scenarios.sumo_net import realdata_dir
+        found = find_scenarios(realdata_dir() / 'av2')
+        if i >= len(found):
+            raise ValueError(f'av2: case {i} but only {len(found)} scenarios')
+        sc = load_av2(found[i])
+    else:
+        raise ValueError(f'family {opts.family!r} not in {FAMILIES}')
+    return sc, gt_doc(sc, arrays=True)
 
 
 def package_version() -> str:
@@ -117,8 +148,7 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
     """Simulate, estimate (or oracle), evaluate case ``i``; never raises for estimator errors."""
     seed = opts.seed + i
     t0 = time.perf_counter()
-    sc = simulate_scenario(seed, SimConfig())
-    gt = gt_to_dict(sc, arrays=True)
+    sc, gt = make_case(opts, i)
     sim_ms = 1e3 * (time.perf_counter() - t0)
     tb = None
     if opts.oracle:
@@ -166,6 +196,8 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     """
     if opts.mode not in MODES:
         raise ValueError(f'mode {opts.mode!r} not in {MODES}')
+    if opts.family not in FAMILIES:
+        raise ValueError(f'family {opts.family!r} not in {FAMILIES}')
     if estimator is not None and opts.jobs > 1:
         raise ValueError('a custom estimator runs in-process only (jobs=1)')
     bar = _progress(opts.n)
@@ -184,7 +216,8 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     summary = aggregate([c['metrics'] for c in cases], [c['timing_ms'] for c in cases])
     config = {**asdict(opts), 'estimator': 'oracle (ground truth)' if opts.oracle else
               getattr(estimator, '__module__', 'intersection_estimator.pipeline') + '.estimate',
-              'sim_config': SimConfig().to_dict(), 'package_version': package_version(),
+              'sim_config': SimConfig(empty_lane_prob=opts.empty_lanes).to_dict(),
+              'family_config': _family_config(opts.family), 'package_version': package_version(),
               'machine': machine_info(), 'wall_s': time.perf_counter() - t0,
               'timing_note': ('timing_ms measured inside the worker per case (estimator only, '
                               'simulation excluded, after one untimed warm-up run per '
@@ -193,6 +226,13 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
                                   'timings are inflated: use --jobs 1 for headline timings'
                                   if opts.jobs > 1 else 'single process'))}
     return {'config': config, 'summary': summary, 'cases': cases}
+
+
+def _family_config(family: str) -> dict:
+    if family == 'sumo':
+        from .scenarios.sumo_config import SumoConfig
+        return SumoConfig().to_dict()
+    return {}
 
 
 # ---------------------------------------------------------------- table
@@ -215,6 +255,8 @@ def format_table(result: dict) -> str:
         ('arm accuracy', _fmt(s['arm_accuracy'], 'pct'), paper('arm_accuracy', 'pct')),
         ('lane-level topology accuracy', _fmt(s['topology_accuracy'], 'pct'),
          paper('topology_accuracy', 'pct')),
+        ('topology_observed (lanes with traffic)', _fmt(s.get('topology_observed_accuracy'), 'pct'),
+         ''),
         ('center error mean / median [m]',
          f"{_fmt(s['center_error_m_mean'], 'm')} / {_fmt(s['center_error_m_median'], 'm')}",
          '~' + paper('center_error_m_mean', 'm') + ' (Fig. 4)'),
@@ -222,6 +264,11 @@ def format_table(result: dict) -> str:
          paper('angle_error_deg_mean', 'deg')),
         ('lane course error mean [cm]', _fmt(s['lane_error_cm_mean'], 'cm'),
          paper('lane_error_cm_mean', 'cm')),
+        ('traffic-following floor (all / matched) [cm]',
+         f"{_fmt(s.get('floor_cm_mean'), 'cm')} / {_fmt(s.get('floor_cm_matched_mean'), 'cm')}", ''),
+        ('  floor entering / leaving / connector [cm]',
+         ' / '.join(_fmt(s.get(f'floor_cm_mean_{k}'), 'cm')
+                    for k in ('entering', 'leaving', 'connector')), ''),
         ('lane error entering / leaving / connector [cm]',
          ' / '.join(_fmt(s.get(f'lane_error_cm_mean_{k}'), 'cm')
                     for k in ('entering', 'leaving', 'connector')), ''),
@@ -242,7 +289,8 @@ def format_table(result: dict) -> str:
          paper('total_ms_median', 'ms') + ' (mean)'),
         ('failed cases', f"{s['n_failed']} / {s['n']}", ''),
     ]
-    head = (f"bench  mode={cfg['mode']}  n={cfg['n']}  seed={cfg['seed']}  jobs={cfg['jobs']}  "
+    head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}  n={cfg['n']}  "
+            f"seed={cfg['seed']}  jobs={cfg['jobs']}  "
             f"estimator={cfg['estimator']}")
     w0 = max(len(r[0]) for r in rows)
     w1 = max(len(r[1]) for r in rows + [('', 'ours', '')])
@@ -265,15 +313,30 @@ def is_perfect(summary: dict) -> bool:
 
 # ---------------------------------------------------------------- CLI
 def _cmd(args) -> int:
+    if not 0.0 <= args.empty_lanes < 1.0:
+        print(f'bench: --empty-lanes {args.empty_lanes} not in [0, 1)', file=sys.stderr)
+        return 2
+    if args.empty_lanes and args.family != 'table1':
+        print('bench: --empty-lanes applies to --family table1 only', file=sys.stderr)
+        return 2
     opts = BenchOptions(n=args.n, mode=args.mode, samples=args.samples,
                         lane_samples=args.lane_samples, seed=args.seed, jobs=args.jobs,
-                        oracle=args.oracle, warmup=not args.no_warmup)
+                        oracle=args.oracle, warmup=not args.no_warmup, family=args.family,
+                        empty_lanes=args.empty_lanes)
     if not opts.oracle:
         try:
             _load_estimator()
         except ImportError as e:
             print(f'bench: estimator not available ({e}); use --oracle', file=sys.stderr)
             return 2
+    if opts.family == 'av2':
+        from .realdata.av2 import find_scenarios
+        from .scenarios.sumo_net import realdata_dir
+        have = len(find_scenarios(realdata_dir() / 'av2'))
+        if have == 0:
+            print(f"bench: no AV2 scenarios under {realdata_dir() / 'av2'}", file=sys.stderr)
+            return 2
+        opts = replace(opts, n=min(opts.n, have))
     result = run_bench(opts)
     print(format_table(result))
     if args.json:
@@ -287,9 +350,14 @@ def _cmd(args) -> int:
 
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``bench`` subcommand."""
-    p = subparsers.add_parser('bench', help='synthetic benchmark (paper Table I)',
+    p = subparsers.add_parser('bench', help='benchmark (paper Table I, SUMO, AV2)',
                               description=__doc__.split('\n\n')[0])
     p.add_argument('--n', type=int, default=1000, help='number of intersections')
+    p.add_argument('--family', choices=FAMILIES, default='table1',
+                   help='table1: our simulator; sumo: SUMO on generated + inD junctions; '
+                   'av2: the Argoverse 2 scenarios in ../shared/realdata/av2')
+    p.add_argument('--empty-lanes', type=float, default=0.0, metavar='P',
+                   help='table1: leave each lane without traffic with probability P')
     p.add_argument('--mode', choices=MODES, default='tracked', help='detection input')
     p.add_argument('--samples', type=int, default=5000, help='topology MCMC samples')
     p.add_argument('--lane-samples', type=int, default=20000,

@@ -19,6 +19,7 @@ SUBCOMMANDS = (
     'intersection_estimator.evaluate',     # evaluate
     'intersection_estimator.bench',        # bench
     'intersection_estimator.soak',         # soak
+    'intersection_estimator.realdata.av2', # av2
 )
 
 

@@ -14,6 +14,19 @@ Per case (:func:`evaluate`):
   unmatched. Points beyond the ends of the true center line are left out (no
   orthogonal foot point). ``lane_error_cm`` = mean over matched lanes; recall over true
   lanes carrying traffic, precision over estimated lanes;
+* what the data show (issue 15): a true lane is *used* when its ``traffic`` (vehicles
+  that drove it, from the ground truth) is > 0, an arm when any of its lanes is.
+  ``topology_observed_correct`` asks only for what traffic used and never excuses
+  anything beyond the truth: no estimated arm beyond the true arms, every used true arm
+  matched, and per matched arm ``used <= estimated <= true`` lanes in and out (a curb
+  lane no vehicle drove may be missing, an extra lane may not). The strict
+  ``topology_correct`` stays beside it;
+* traffic-following floor: where the ground truth carries a ``traffic_line`` per lane
+  (the line that follows the traffic on that lane, see
+  :mod:`intersection_estimator.scenarios.floor`), ``floor_cm`` is its mean orthogonal
+  distance to the true center line over the lanes that have one (``floor_cm_matched``:
+  over the true lanes our estimate matched, the like-for-like figure beside
+  ``lane_error_cm``);
 * ``connectivity_recall`` -- share of matched true connectors whose estimated
   counterpart follows the estimate matched to the true entering lane and is followed by
   the estimate matched to the true leaving lane.
@@ -39,7 +52,8 @@ __all__ = ['evaluate', 'evaluate_files', 'aggregate', 'SUMMARY_KEYS', 'GATE_M', 
 GATE_M = 1.5
 RESAMPLE_M = 0.5
 KINDS = ('entering', 'leaving', 'connector')
-SUMMARY_KEYS = ('n', 'arm_accuracy', 'topology_accuracy', 'center_error_m_mean',
+SUMMARY_KEYS = ('n', 'arm_accuracy', 'topology_accuracy', 'topology_observed_accuracy',
+                'center_error_m_mean', 'floor_cm_mean', 'floor_cm_matched_mean',
                 'center_error_m_median', 'angle_error_deg_mean', 'lane_error_cm_mean',
                 'lane_recall', 'lane_precision', 'connectivity_recall', 'topology_ms_median',
                 'topology_ms_p95', 'lanes_ms_median', 'lanes_ms_p95')
@@ -135,10 +149,13 @@ def _parse(d, name):
         if not isinstance(succ, list):
             raise Malformed(f'{what}.successors: expected a list')
         line = _points(_get(x, 'center_line', what), f'{what}.center_line', 2)
+        tl = x.get('traffic_line')
+        tl = None if tl is None or len(tl) < 2 else _points(tl, f'{what}.traffic_line', 2)
         lanes.append({'id': lid, 'kind': kind, 'arm': arm, 'arm_to': arm_to,
                       'center': line, 'pts': resample(line),
                       'successors': [str(s) for s in succ],
-                      'traffic': int(x.get('traffic', 1))})
+                      'traffic': int(_num(x.get('traffic', 1), f'{what}.traffic')),
+                      'traffic_line': tl})
     return center, arms, lanes
 
 
@@ -272,7 +289,10 @@ def _connectivity(est_lanes, gt_lanes, match):
 def _failed(reason, n_arms_true=None, gt_lanes=None) -> dict:
     traffic = sum(g['traffic'] > 0 for g in gt_lanes) if gt_lanes is not None else None
     return {'ok': False, 'reason': reason, 'n_arms_true': n_arms_true, 'n_arms_est': None,
-            'arm_correct': False, 'topology_correct': False, 'center_error_m': None,
+            'arm_correct': False, 'topology_correct': False, 'topology_observed_correct': False,
+            'arms_true_used': None, 'floor_cm': None, 'floor_cm_sum': 0.0, 'floor_lanes': 0,
+            'floor_cm_matched': None, 'floor_cm_matched_sum': 0.0, 'floor_lanes_matched': 0,
+            'used_lanes_per_arm': None, 'center_error_m': None,
             'angle_error_deg': None, 'arms_matched': 0, 'angle_error_deg_sum': 0.0,
             'lanes_true': len(gt_lanes) if gt_lanes is not None else None,
             'lanes_true_traffic': traffic, 'lanes_est': 0, 'lanes_matched': 0,
@@ -302,9 +322,15 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
     n_traffic = sum(g['traffic'] > 0 for g in gl)
     m_traffic = sum(gl[g]['traffic'] > 0 for g in match)
     n_con, ok_con = _connectivity(el, gl, match)
-    by_kind = _by_kind(el, gl, match)
+    floor = _floor(gl, match)
+    by_kind = _by_kind(el, gl, match, floor)
+    used_in, used_out = _used_lanes(gl, len(ga))
     return {'ok': True, 'reason': None, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
             'arm_correct': arm_correct, 'topology_correct': topo,
+            'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
+            'arms_true_used': int(np.count_nonzero(used_in + used_out)),
+            'used_lanes_per_arm': [[int(a), int(b)] for a, b in zip(used_in, used_out)],
+            **_floor_summary(floor, match),
             'center_error_m': float(np.linalg.norm(ec - gc)),
             'angle_error_deg': float(np.degrees(dang).mean()) if len(dang) else None,
             'arms_matched': len(dang), 'angle_error_deg_sum': float(np.degrees(dang).sum()),
@@ -318,17 +344,64 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
             'connectivity_recall': ok_con / n_con if n_con else None, 'by_kind': by_kind}
 
 
-def _by_kind(est_lanes, gt_lanes, match) -> dict:
-    """Lane counts and error sums per kind (where does the lane step lose accuracy?)."""
+def _by_kind(est_lanes, gt_lanes, match, floor) -> dict:
+    """Lane counts, error and floor sums per kind (where does the lane step lose accuracy?)."""
     out = {}
     for kind in KINDS:
         m = {g: d for g, (_, d) in match.items() if gt_lanes[g]['kind'] == kind}
+        f = [d for g, d in floor.items() if gt_lanes[g]['kind'] == kind]
         out[kind] = {'est': sum(e['kind'] == kind for e in est_lanes),
                      'true_traffic': sum(g['kind'] == kind and g['traffic'] > 0 for g in gt_lanes),
                      'matched': len(m),
                      'matched_traffic': sum(gt_lanes[g]['traffic'] > 0 for g in m),
-                     'error_cm_sum': float(100 * sum(m.values()))}
+                     'error_cm_sum': float(100 * sum(m.values())),
+                     'floor_lanes': len(f), 'floor_cm_sum': float(100 * sum(f))}
     return out
+
+
+def _used_lanes(gt_lanes, n_arms):
+    """Per true arm: how many entering / leaving lanes carried traffic (issue 15)."""
+    used_in, used_out = np.zeros(n_arms, int), np.zeros(n_arms, int)
+    for g in gt_lanes:
+        if g['traffic'] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms:
+            (used_in if g['kind'] == 'entering' else used_out)[g['arm']] += 1
+    return used_in, used_out
+
+
+def _topology_observed(est_arms, gt_arms, r, c, used_in, used_out) -> bool:
+    """Lane-level topology on what the traffic shows (module docstring): lanes and arms
+    no vehicle used are not asked for; nothing beyond the truth is excused."""
+    if len(est_arms) > len(gt_arms):
+        return False
+    to_est = {int(j): int(i) for i, j in zip(r, c)}
+    for j in range(len(gt_arms)):
+        if j not in to_est:
+            if used_in[j] + used_out[j] > 0:
+                return False
+            continue
+        e = est_arms[to_est[j]]
+        if not (used_in[j] <= e[1] <= gt_arms[j, 1] and used_out[j] <= e[2] <= gt_arms[j, 2]):
+            return False
+    return True
+
+
+def _floor(gt_lanes, match) -> dict:
+    """{true lane index: distance [m] of its traffic-following line to its center line}."""
+    out = {}
+    for i, g in enumerate(gt_lanes):
+        if g['traffic_line'] is not None and g['traffic'] > 0:
+            d = lane_distance(g['traffic_line'], g['center'])
+            if math.isfinite(d):
+                out[i] = d
+    return out
+
+
+def _floor_summary(floor, match) -> dict:
+    fm = [d for g, d in floor.items() if g in match]
+    return {'floor_cm': float(100 * np.mean(list(floor.values()))) if floor else None,
+            'floor_cm_sum': float(100 * sum(floor.values())), 'floor_lanes': len(floor),
+            'floor_cm_matched': float(100 * np.mean(fm)) if fm else None,
+            'floor_cm_matched_sum': float(100 * sum(fm)), 'floor_lanes_matched': len(fm)}
 
 
 # ---------------------------------------------------------------- summary
@@ -360,10 +433,14 @@ def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
         'n': n, 'n_failed': n - len(ok),
         'arm_accuracy': _ratio(sum(m['arm_correct'] for m in metrics), n),
         'topology_accuracy': _ratio(sum(m['topology_correct'] for m in metrics), n),
+        'topology_observed_accuracy': _ratio(
+            sum(m.get('topology_observed_correct', False) for m in metrics), n),
         'center_error_m_mean': float(np.mean(center)) if center else None,
         'center_error_m_median': float(np.median(center)) if center else None,
         'angle_error_deg_mean': _ratio(total('angle_error_deg_sum'), total('arms_matched')),
         'lane_error_cm_mean': _ratio(total('lane_error_cm_sum'), total('lanes_matched')),
+        'floor_cm_mean': _ratio(total('floor_cm_sum'), total('floor_lanes')),
+        'floor_cm_matched_mean': _ratio(total('floor_cm_matched_sum'), total('floor_lanes_matched')),
         'lane_recall': _ratio(total('lanes_matched_traffic'), total('lanes_true_traffic')),
         'lane_precision': _ratio(total('lanes_matched'), total('lanes_est')),
         'connectivity_recall': _ratio(total('connectors_connected'), total('connectors_matched')),
@@ -374,6 +451,8 @@ def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
                                                        sum(x['matched'] for x in k))
         summary[f'lane_recall_{kind}'] = _ratio(sum(x['matched_traffic'] for x in k),
                                                 sum(x['true_traffic'] for x in k))
+        summary[f'floor_cm_mean_{kind}'] = _ratio(sum(x.get('floor_cm_sum', 0.0) for x in k),
+                                                  sum(x.get('floor_lanes', 0) for x in k))
     for step in ('topology', 'lanes', 'total'):
         vals = [t.get(step) for t in timings if t]
         summary[f'{step}_ms_median'] = _pct(vals, 50)

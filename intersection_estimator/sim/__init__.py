@@ -76,7 +76,8 @@ def simulate_scenario(seed: int, config: SimConfig = SimConfig()) -> Scenario:
     duration = float(g_traffic.uniform(*config.duration))
     ego = make_ego(g_ego, inter, lanelets, config, duration)
     routes, _ = choose_routes(g_traffic, lanelets, config)
-    n_obs = n_cover(routes, lanelets) if config.cover_all_lanes else 0
+    n_obs = (n_cover(routes, lanelets, only_routed=config.empty_lane_prob > 0)
+             if config.cover_all_lanes else 0)
     rng_m = scene_sensor_range(ego, lanelets, config)
     tracks = make_tracks(g_traffic, lanelets, routes, config, duration, ego=ego, n_observed=n_obs,
                          sensor_range=rng_m)

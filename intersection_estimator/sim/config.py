@@ -19,6 +19,12 @@ a fixed 100 m missed far arms (seeds 0..199: 41 % of scenes raised, median 100 m
 durations and geometry are unchanged. Measured with 'tracked' detections (>= 5 within
 1 m of the center line, heading within 30 deg, spanning >= 20 m), seeds 0..199: every
 lane observed in 66.5 % of scenes before, 100 % after (seeds 1000..1299: 100 %).
+
+Lanes without traffic (issue 15, measured separately): with ``empty_lane_prob > 0`` each
+entering and leaving lane is drawn empty with that probability (one extra draw per lane,
+after the routes are listed; none at 0, so the default scenes are unchanged) and every
+route through an empty lane is dropped (at least one route is kept); covering then
+covers the lanes that still have routes.
 """
 
 from __future__ import annotations
@@ -49,6 +55,9 @@ class SimConfig:
     max_traj_per_lane: int = 6
     traj_per_lane: tuple[float, float] = (2.0, 5.0)  # target mean per entering lane
     cover_all_lanes: bool = True                    # every lane gets >= 1 observed trajectory
+    empty_lane_prob: float = 0.0                    # each entering / leaving lane left without
+                                                    # traffic with this probability (issue 15:
+                                                    # "<= 6 per lane" includes 0; 0 = as before)
     min_observed_length: float = 30.0               # ... seen over >= this [m] of the lane's
     observed_zone: float = 40.0                     # ... first/last this [m] at the stop line
     duration: tuple[float, float] = (20.0, 40.0)    # scenario length [s]

@@ -63,7 +63,7 @@ def choose_routes(rng: np.random.Generator, lanelets: list[Lanelet], cfg: SimCon
     The covering routes come first in ``routes``; :func:`make_tracks` schedules the
     first ``n_cover(routes, lanelets)`` of them so that the sensors observe them.
     """
-    routes = _routes(lanelets)
+    routes = _drop_empty(rng, _routes(lanelets), lanelets, cfg.empty_lane_prob)
     cap = cfg.max_traj_per_lane
     count = {ll.id: 0 for ll in lanelets}
     chosen: list[tuple[str, str, str]] = []
@@ -93,10 +93,24 @@ def choose_routes(rng: np.random.Generator, lanelets: list[Lanelet], cfg: SimCon
     return chosen, count
 
 
-def n_cover(routes, lanelets) -> int:
+def _drop_empty(rng, routes, lanelets, prob: float):
+    """Routes left after drawing each entering / leaving lane empty with ``prob`` (no
+    draw at all when ``prob`` is 0; at least one route survives)."""
+    if prob <= 0 or not routes:
+        return routes
+    lanes = [ll.id for ll in lanelets if ll.kind in ('entering', 'leaving')]
+    empty = {lid for lid, u in zip(lanes, rng.uniform(size=len(lanes))) if u < prob}
+    kept = [r for r in routes if r[0] not in empty and r[2] not in empty]
+    return kept or [routes[int(rng.integers(len(routes)))]]
+
+
+def n_cover(routes, lanelets, only_routed: bool = False) -> int:
     """Length of the prefix of ``routes`` needed to cover every entering and leaving lane
-    (the covering routes of :func:`choose_routes` come first)."""
+    (the covering routes of :func:`choose_routes` come first); ``only_routed``: every
+    such lane that some route uses (lanes drawn empty have none)."""
     need = {ll.id for ll in lanelets if ll.kind in ('entering', 'leaving')}
+    if only_routed:
+        need &= {x for r in routes for x in (r[0], r[2])}
     seen: set = set()
     for i, r in enumerate(routes):
         if need <= seen:

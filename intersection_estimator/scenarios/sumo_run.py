@@ -1,0 +1,89 @@
+"""Run SUMO on a case and read its floating-car data (issue 15.1).
+
+``sumo -n NET -r ROUTES --fcd-output fcd.xml`` at ``step_s`` with the case's seed
+(deterministic: same seed and inputs -> byte-identical fcd), then
+:func:`read_fcd` keeps the recorded window ``[warmup, warmup + duration]`` and returns
+one :class:`FcdTrack` per vehicle / person: times rebased to the window, position,
+yaw (SUMO's angle is clockwise from north, degrees), speed, the lane (vehicles) per
+sample, the vehicle type.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+import re
+
+import numpy as np
+
+from .sumo_net import run_tool, sumo_binary
+
+__all__ = ['FcdTrack', 'run_sumo', 'read_fcd']
+
+
+@dataclass
+class FcdTrack:
+    id: str
+    kind: str                 # vehicle type id ('car', 'truck', 'bike', 'egotype') or 'person'
+    cycle: np.ndarray         # (M,) int, window start = 0
+    xy: np.ndarray
+    yaw: np.ndarray
+    speed: np.ndarray
+    lane: np.ndarray          # (M,) str, '' for persons
+
+
+def run_sumo(net, routes, folder, *, seed: int, end: float, step: float, record_from: float = 0.0
+             ) -> Path:
+    """Run SUMO to ``end`` s; floating-car data from ``record_from`` s on."""
+    fcd = Path(folder) / 'fcd.xml'
+    run_tool([sumo_binary('sumo'), '-n', str(net), '-r', str(routes), '--begin', '0',
+              '--end', f'{end:.1f}', '--step-length', f'{step}', '--seed', str(int(seed)),
+              '--fcd-output', str(fcd), '--device.fcd.begin', f'{record_from:.1f}',
+              '--fcd-output.attributes', 'x,y,angle,speed,lane,type',
+              '--pedestrian.model', 'nonInteracting',
+              '--no-step-log', 'true', '--no-warnings', 'true',
+              '--ignore-route-errors', 'true', '--time-to-teleport', '-1',
+              '--collision.action', 'none', '--duration-log.disable', 'true'], 'sumo')
+    return fcd
+
+
+_STEP = re.compile(rb'<timestep time="([^"]+)"')
+_OBJ = re.compile(rb'<(vehicle|person) ([^>]*?)/?>')
+_ATTR = re.compile(rb'(\w+)="([^"]*)"')
+
+
+def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack]:
+    """Tracks in the window (module doc), sorted by id. A line scanner over SUMO's
+    one-element-per-line fcd file (several times faster than an XML tree walk)."""
+    rows: dict = {}
+    cyc, inside = 0, False
+    with open(path, 'rb') as fh:
+        for line in fh:
+            m = _STEP.search(line)
+            if m:
+                t = float(m.group(1))
+                inside = warmup - 1e-6 <= t <= warmup + duration + 1e-6
+                cyc = int(round((t - warmup) / step))
+                continue
+            m = _OBJ.search(line) if inside else None
+            if m is None:
+                continue
+            a = dict(_ATTR.findall(m.group(2)))
+            kind = a.get(b'type', b'person').decode() if m.group(1) == b'vehicle' else 'person'
+            rows.setdefault(a[b'id'].decode(), (kind, []))[1].append(
+                (cyc, float(a[b'x']), float(a[b'y']), float(a[b'angle']), float(a[b'speed']),
+                 a.get(b'lane', b'').decode()))
+    out = []
+    for vid in sorted(rows):
+        kind, r = rows[vid]
+        ang = np.array([x[3] for x in r])
+        out.append(FcdTrack(id=vid, kind=kind, cycle=np.array([x[0] for x in r], int),
+                            xy=np.array([[x[1], x[2]] for x in r]),
+                            yaw=np.radians(90.0 - ang), speed=np.array([x[4] for x in r]),
+                            lane=np.array([x[5] for x in r], dtype=object).astype(str)))
+    return out
+
+
+def yaw_wrap(a):
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi

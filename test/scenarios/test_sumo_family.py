@@ -1,0 +1,78 @@
+"""SUMO scenario family (issue 15.1): deterministic per seed, ground truth = the net."""
+
+import math
+
+import numpy as np
+import pytest
+
+from intersection_estimator.estimate_io import dumps
+from intersection_estimator.evaluate import evaluate
+from intersection_estimator.scenarios import gt_doc
+from intersection_estimator.scenarios.sumo import sumo_scenario
+from intersection_estimator.scenarios.sumo_config import SumoConfig
+from intersection_estimator.scenarios.sumo_gt import net_gt, read_net
+from intersection_estimator.scenarios.sumo_net import realdata_dir
+
+GEN = SumoConfig(ind_share=0.0, duration=(20.0, 20.0), warmup_s=25.0)
+
+
+@pytest.fixture(scope='module')
+def case(tmp_path_factory):
+    work = tmp_path_factory.mktemp('sumo')
+    return sumo_scenario(2, GEN, workdir=work), work
+
+
+def test_same_seed_same_case(case, tmp_path):
+    sc, _ = case
+    again = sumo_scenario(2, GEN, workdir=tmp_path)
+    assert dumps(gt_doc(sc)) == dumps(gt_doc(again))
+    for mode in ('tracked', 'raw'):
+        a, b = sc.detections(mode), again.detections(mode)
+        assert len(a) > 0 and np.array_equal(a.xy, b.xy) and np.array_equal(a.t, b.t)
+    other = sumo_scenario(3, GEN, workdir=tmp_path / 'other')
+    assert dumps(gt_doc(other)) != dumps(gt_doc(sc))
+
+
+def _vehicle_lanes(edge):
+    if edge.getFunction() not in ('', 'normal'):
+        return []
+    return [ln for ln in edge.getLanes() if ln.allows('passenger')]
+
+
+def test_ground_truth_matches_the_net(case):
+    sc, work = case
+    net = read_net(work / 'net.net.xml')
+    node = net.getNode('C')
+    incoming = [e for e in node.getIncoming() if _vehicle_lanes(e)]
+    outgoing = [e for e in node.getOutgoing() if _vehicle_lanes(e)]
+    assert sum(a.lanes_in for a in sc.gt.arms) == sum(len(_vehicle_lanes(e)) for e in incoming)
+    assert sum(a.lanes_out for a in sc.gt.arms) == sum(len(_vehicle_lanes(e)) for e in outgoing)
+    assert len(sc.gt.arms) == len(incoming) == sc.info['arms']
+    n_conn = sum(1 for e in incoming for ln in _vehicle_lanes(e) for c in ln.getOutgoing()
+                 if c.getToLane().allows('passenger'))
+    assert sum(ll.kind == 'connector' for ll in sc.gt_lanelets) == n_conn
+    for e in incoming:     # arm angle = the approach direction at the stop line, reversed
+        shape = np.array(_vehicle_lanes(e)[0].getShape())[:, :2]
+        d = shape[-2] - shape[-1]
+        ang = math.atan2(d[1], d[0])
+        assert min(abs(math.remainder(ang - a.angle, 2 * math.pi)) for a in sc.gt.arms) < 0.35
+
+
+def test_some_traffic_and_a_floor(case):
+    sc, _ = case
+    doc = gt_doc(sc, arrays=True)
+    m = evaluate(doc, doc)
+    assert m['topology_observed_correct'] and m['lanes_true_traffic'] > 0
+    assert 1.0 < m['floor_cm'] < 60.0          # tracked noise 1 m, smoothed along the lane
+    labels = {int(x) for x in sc.detections('tracked').label}
+    assert 1 in labels
+
+
+@pytest.mark.parametrize('k', [1, 2, 3, 4])
+def test_ind_networks_give_a_junction(k):
+    net = realdata_dir() / 'ind_sumo' / f'inD_{k}.net.xml'
+    assert net.exists(), f'{net} missing: ../shared/realdata must lie beside the checkout'
+    gt, _, _ = net_gt(net)
+    assert 3 <= len(gt.intersection.arms) <= 4
+    assert all(a.lanes_in + a.lanes_out >= 1 for a in gt.intersection.arms)
+    assert sum(ll.kind == 'connector' for ll in gt.lanelets) >= 5
