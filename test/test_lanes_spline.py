@@ -9,8 +9,8 @@ import pytest
 
 from intersection_estimator.lanes import LaneConfig
 from intersection_estimator.lanes.init import arc_bezier, lane_specs, trajectories, assign_parts
-from intersection_estimator.lanes.spline import (connector_pieces, fit_connector, sample_curve,
-                                                 traffic_connector)
+from intersection_estimator.lanes.spline import (connector_pieces, fit_connector, prefer_fit,
+                                                 sample_curve, traffic_connector)
 from intersection_estimator.evaluate import lane_distance
 from intersection_estimator.pipeline import estimate
 from intersection_estimator.sim import simulate_scenario
@@ -56,6 +56,21 @@ def test_fit_follows_a_curve_that_the_arc_start_does_not():
     assert np.ptp(d) < 0.05
 
 
+def test_the_fit_replaces_the_start_only_where_the_traffic_says_so():
+    truth = _ellipse_turn()
+    c0, c1 = truth[0], truth[-1]
+    t0, t1 = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    arc = arc_bezier(c0, t0, c1, t1, np.linspace(0, 1, 100))
+    rng = np.random.default_rng(1)
+    for curve, wanted in ((truth, True), (arc, False)):
+        pieces = connector_pieces(_noisy_runs(curve, rng, noise=1.0), c0, c1)
+        ctrl, knots = fit_connector(pieces, c0, t0, c1, t1, smooth=10.0)
+        fitted = sample_curve(ctrl, knots, 1.0, 6)[0]
+        n_par = 2 * (len(ctrl) - 4) + 2
+        assert prefer_fit(pieces, fitted, arc, n_par, 2.0) is wanted
+        assert prefer_fit(pieces, fitted, arc, n_par, 0.0) is True
+
+
 def test_too_little_traffic_gives_none():
     c0, c1 = np.zeros(2), np.array([10.0, 10.0])
     assert fit_connector([np.array([[1.0, 0.0], [5.0, 5.0], [9.0, 9.0]])], c0, [1, 0], c1,
@@ -69,7 +84,7 @@ def test_switch_reshapes_the_connectors_and_keeps_the_lanes():
     topo = sc.gt
     out = {}
     for flag in (0, 1):
-        cfg = replace(LaneConfig(), connector_traffic=flag)
+        cfg = replace(LaneConfig(), connector_traffic=flag, traffic_select=0.0)
         trajs = trajectories(dets)
         assign_parts(trajs, topo, cfg)
         specs, _, _ = lane_specs(topo, trajs, cfg)
@@ -90,7 +105,7 @@ def test_pipeline_with_traffic_connectors_scores_close_to_the_truth():
     sc = simulate_scenario(4)
     from intersection_estimator.evaluate import evaluate
     r = estimate(sc.detections('tracked'), mode='tracked', seed=0, lane_samples=5000,
-                 lane_config=replace(LaneConfig(), connector_traffic=1))
+                 lane_config=replace(LaneConfig(), connector_traffic=1, traffic_select=0.0))
     m = evaluate((r.intersection, r.lanelets), sc)
     assert m['topology_correct'] and m['by_kind']['connector']['matched'] > 0
     k = m['by_kind']['connector']

@@ -19,6 +19,8 @@ _RANGES = {
     'traffic_ctrl_spacing': (0.5, 50.0, 'chord per control point of a traffic connector [m]'),
     'traffic_smooth': (0.0, 1e6, 'second-difference penalty on its control points'),
     'traffic_min_points': (3, 10**6, 'fewest trajectory points to shape a connector'),
+    'traffic_select': (0.0, 1000.0, 'the fit replaces the start shape only when better by this '
+                       'per parameter (2: Akaike; 0: always)'),
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
     'stop_step': (0.01, 5.0, 'grid step of the stop-distance search [m]'),
@@ -91,6 +93,7 @@ class LaneConfig:
     traffic_ctrl_spacing: float = 4.0
     traffic_smooth: float = 10.0
     traffic_min_points: int = 10
+    traffic_select: float = 2.0
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25

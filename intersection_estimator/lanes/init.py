@@ -453,9 +453,10 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
         if e is None or o is None:
             continue
         E, O = specs[e], specs[o]
-        shaped = traffic_connector(E, O, driven[((a, k), (b, j))], cfg) \
-            if cfg.connector_traffic else None
-        left, right = shaped if shaped is not None else _connector_borders(E, O, cfg)
+        left, right = _connector_borders(E, O, cfg)
+        if cfg.connector_traffic:
+            shaped = traffic_connector(E, O, driven[((a, k), (b, j))], cfg, (left, right))
+            left, right = shaped if shaped is not None else (left, right)
         n_st = len(left)
         lk = [E.left_keys[-1]] + [None] * (n_st - 2) + [O.left_keys[0]]
         rk = [E.right_keys[-1]] + [None] * (n_st - 2) + [O.right_keys[0]]

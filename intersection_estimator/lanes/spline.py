@@ -16,7 +16,9 @@ Meyer, Walter, Lauer 2020 (arXiv 2007.06904) fit 1-D cubic B-splines to the traf
    control points; the lanes it joins fix it: ``P_0 = c0``, ``P_1 = c0 + alpha t0``,
    ``P_{n-2} = c1 - beta t1``, ``P_{n-1} = c1`` (end points shared, tangents continuous;
    ``alpha``, ``beta`` and the inner control points are the unknowns);
-3. the curve is sampled at equal arc length (``spacing``) -- the connector's stations.
+3. the curve is sampled at equal arc length (``spacing``) -- the connector's stations;
+4. it replaces the start shape only where it explains the traffic better by more than
+   ``traffic_select`` per free parameter (:func:`prefer_fit`; 2 = Akaike's criterion).
 
 Too little traffic (fewer than ``min_points`` points in the pieces) or a degenerate fit
 returns None and the caller keeps its own start shape.
@@ -30,7 +32,7 @@ import numpy as np
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-__all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'traffic_connector']
+__all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector']
 
 
 def connector_pieces(trajs_xy: list[np.ndarray], c0: np.ndarray, c1: np.ndarray,
@@ -133,10 +135,34 @@ def sample_curve(ctrl: np.ndarray, knots: np.ndarray, spacing: float, min_st: in
     return spl(u), T
 
 
-def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg):
+def _rss(Q: np.ndarray, line: np.ndarray, clip: float) -> float:
+    """Sum of clipped squared distances of ``Q`` to a polyline (resampled every 0.1 m)."""
+    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    q = np.linspace(0.0, s[-1], max(2, int(s[-1] / 0.1) + 1))
+    dense = np.stack([np.interp(q, s, line[:, 0]), np.interp(q, s, line[:, 1])], axis=1)
+    d = cKDTree(dense).query(Q)[0]
+    return float(np.sum(np.minimum(d, clip) ** 2))
+
+
+def prefer_fit(pieces, fitted: np.ndarray, start: np.ndarray, n_params: int,
+               penalty: float, clip: float = 3.0) -> bool:
+    """Does the fitted curve explain the pieces better than the caller's start shape by
+    more than ``penalty`` per free parameter (``penalty = 2``: Akaike's criterion,
+    ``m log(RSS_start / RSS_fit) > penalty * n_params``)? ``penalty = 0``: always."""
+    if penalty <= 0:
+        return True
+    Q = np.concatenate(pieces)
+    r_fit, r_start = _rss(Q, fitted, clip), _rss(Q, start, clip)
+    return len(Q) * math.log(max(r_start, 1e-12) / max(r_fit, 1e-12)) > penalty * n_params
+
+
+def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):
     """Left/right borders of the connector from lanelet spec ``E`` to ``O`` shaped by
-    ``trajs_xy`` (the trajectories that drove it), or None (too little traffic). Half
-    widths are blended from the two end cross sections; end points are the lanes'."""
+    ``trajs_xy`` (the trajectories that drove it), or None (too little traffic, or --
+    given the caller's ``start`` borders -- the fit does not beat them by
+    ``traffic_select`` per parameter, :func:`prefer_fit`). Half widths are blended from
+    the two end cross sections; end points are the lanes'."""
     if len(E.left) < 2 or len(O.left) < 2:
         return None
     c0, c1 = 0.5 * (E.left[-1] + E.right[-1]), 0.5 * (O.left[0] + O.right[0])
@@ -148,6 +174,9 @@ def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg):
     if fit is None:
         return None
     C, T = sample_curve(*fit, cfg.connector_spacing, cfg.connector_min_stations)
+    if start is not None and not prefer_fit(pieces, C, 0.5 * (start[0] + start[1]),
+                                            2 * (len(fit[0]) - 4) + 2, cfg.traffic_select):
+        return None
     N = np.stack([-T[:, 1], T[:, 0]], axis=1)
     f = np.linspace(0.0, 1.0, len(C))[:, None]
     wl = (1 - f) * np.linalg.norm(E.left[-1] - c0) + f * np.linalg.norm(O.left[0] - c1)
