@@ -1,8 +1,11 @@
 """``estimate.json`` / ``gt.json`` read and write (DESIGN.md §4).
 
 ``estimate.json``: ``{"center", "arms", "lanes", "stats", "traffic_side"}`` with
-``Intersection.to_json`` / ``Lanelet.to_json`` entries; a run that estimated no intersection
-writes ``center`` null and no arms, ``stats.state`` NO_DATA. ``gt.json`` is the same schema
+``Intersection.to_json`` / ``Lanelet.to_json`` entries (arms and lanes with
+``confidence`` and ``support``: the vehicle passages / trajectories behind them); a run that
+estimated no intersection writes ``center`` null and no arms, ``stats.state`` NO_DATA;
+``stats.observability`` says whether the data show an intersection at all
+(:mod:`.observability`: ``state``, ``intersection``, ``intersection_confidence``). ``gt.json`` is the same schema
 plus ``traffic`` per lane (trajectories using it), ``seed``, ``sim_config`` and a few
 scenario facts (``stop_m`` per arm, ``duration_s``, ``ego``). Output is deterministic:
 floats rounded to :data:`DIGITS` decimals, keys sorted, non-finite numbers written as
@@ -52,7 +55,8 @@ def _lane_arrays(ll: Lanelet) -> dict:
     return {'id': ll.id, 'kind': ll.kind, 'arm': int(ll.arm), 'arm_to': int(ll.arm_to),
             'lane_index': int(ll.lane_index), 'center_line': np.asarray(ll.center, float),
             'left': np.asarray(ll.left, float), 'right': np.asarray(ll.right, float),
-            'successors': list(ll.successors), 'confidence': float(ll.confidence)}
+            'successors': list(ll.successors), 'confidence': float(ll.confidence),
+            'support': int(ll.support)}
 
 
 def estimate_to_dict(intersection: Intersection | None, lanelets, stats: dict | None = None, *,

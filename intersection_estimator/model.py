@@ -52,6 +52,7 @@ class Arm:
     lanes_out: int = 1
     lane_width: float = 3.5
     confidence: float = 1.0
+    support: float = 0.0      # vehicle passages that the arm explains (beyond the paper)
 
     @property
     def direction(self) -> np.ndarray:
@@ -93,7 +94,8 @@ class Intersection:
             'arms': [
                 {'angle_deg': math.degrees(float(wrap_angle(a.angle))), 'gap_m': float(a.gap),
                  'lanes_in': int(a.lanes_in), 'lanes_out': int(a.lanes_out),
-                 'lane_width_m': float(a.lane_width), 'confidence': float(a.confidence)}
+                 'lane_width_m': float(a.lane_width), 'confidence': float(a.confidence),
+                 'support': float(a.support)}
                 for a in self.arms
             ],
         }
@@ -102,7 +104,8 @@ class Intersection:
     def from_json(cls, d: dict) -> 'Intersection':
         arms = [Arm(angle=math.radians(a['angle_deg']), gap=a.get('gap_m', 0.0),
                     lanes_in=int(a['lanes_in']), lanes_out=int(a['lanes_out']),
-                    lane_width=a.get('lane_width_m', 3.5), confidence=a.get('confidence', 1.0))
+                    lane_width=a.get('lane_width_m', 3.5), confidence=a.get('confidence', 1.0),
+                    support=float(a.get('support', 0.0)))
                 for a in d['arms']]
         return cls(center=np.asarray(d['center'], float), arms=arms,
                    traffic_side=int(d.get('traffic_side', 1)))
@@ -128,6 +131,7 @@ class Lanelet:
     arm_to: int = -1
     lane_index: int = 0
     confidence: float = 1.0
+    support: int = 0          # trajectories assigned to it (tracked input; 0 without tracks)
 
     def to_json(self) -> dict:
         def pl(a):
@@ -135,7 +139,8 @@ class Lanelet:
         return {'id': self.id, 'kind': self.kind, 'arm': int(self.arm), 'arm_to': int(self.arm_to),
                 'lane_index': int(self.lane_index),
                 'center_line': pl(self.center), 'left': pl(self.left), 'right': pl(self.right),
-                'successors': list(self.successors), 'confidence': float(self.confidence)}
+                'successors': list(self.successors), 'confidence': float(self.confidence),
+                'support': int(self.support)}
 
     @classmethod
     def from_json(cls, d: dict) -> 'Lanelet':
@@ -145,4 +150,5 @@ class Lanelet:
                    center=np.asarray(d['center_line'], float).reshape(-1, 2),
                    successors=[str(s) for s in d.get('successors', [])],
                    arm_to=int(d.get('arm_to', -1)), lane_index=int(d.get('lane_index', 0)),
-                   confidence=float(d.get('confidence', 1.0)))
+                   confidence=float(d.get('confidence', 1.0)),
+                   support=int(d.get('support', 0)))

@@ -17,6 +17,7 @@ import numpy as np
 from .convergence import ConvergenceConfig, ConvergenceTracker
 from .lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
 from .model import Intersection, Lanelet
+from .observability import Observability, assess
 from .observations import Detections
 from .topology import TopologyConfig, TopologyEstimator
 
@@ -51,11 +52,15 @@ class EstimateResult:
     def __post_init__(self):
         if self.sampler_state is None:
             self.sampler_state = self.state
+    observability: Observability | None = None   # do the data show an intersection at all?
 
     def stats(self) -> dict:
-        return {'topology_samples': int(self.topology_samples), 'lane_samples': int(self.lane_samples),
-                'elapsed_s': round(sum(self.timing_ms.get(k, 0.0) for k in ('topology', 'lanes')) / 1e3, 6),
-                'state': self.state, 'observations': int(self.observations)}
+        d = {'topology_samples': int(self.topology_samples), 'lane_samples': int(self.lane_samples),
+             'elapsed_s': round(sum(self.timing_ms.get(k, 0.0) for k in ('topology', 'lanes')) / 1e3, 6),
+             'state': self.state, 'observations': int(self.observations)}
+        if self.observability is not None:
+            d['observability'] = self.observability.to_json()
+        return d
 
 
 def mode_of(dets: Detections) -> str:
@@ -92,16 +97,18 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
     topo.run(n_samples=topology_samples)
     t1 = time.perf_counter()
     best = topo.best
+    observability = assess(dets)           # reading the topology result: timed with it
     tb = time.perf_counter()
     lanelets, n_lane, lane_s = _lanes(best, dets, mode, lane_samples, lane_config, rng_lanes)
     t2 = time.perf_counter()
-    timing = {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3}
+    timing = {'topology': (tb - t0) * 1e3, 'lanes': (t2 - tb) * 1e3, 'total': (t2 - t0) * 1e3}
     state = topo.state
     return EstimateResult(best, lanelets, timing, topo.samples_drawn, n_lane,
                           topo.best_log_posterior, state, len(dets), sampler_state=state,
                           phases_ms=_phases(topo, (t0, ta, t1, tb, t2), lane_s),
                           counters={'topology_preprocess': int(topo.preprocess_count),
-                                    'topology_chains': int(topo.n_chains)})
+                                    'topology_chains': int(topo.n_chains)},
+                          observability=observability)
 
 
 def _phases(topo, marks, lane_s: dict) -> dict:
@@ -126,11 +133,32 @@ def _lanes(best, dets, mode, lane_samples, lane_config, rng):
     if best is None:
         return [], 0, {}
     if mode != 'tracked' or lane_samples <= 0:
-        return lanelets_from_topology(best), 0, {}
+        return with_support(best, lanelets_from_topology(best), None), 0, {}
     lanes = LaneCourseEstimator(lane_config or LaneConfig(), rng)
     lanes.initialise(best, dets)
     lanes.run(n_samples=lane_samples)
-    return lanes.lanelets, lanes.samples_drawn, dict(lanes.timings)
+    return (with_support(best, lanes.lanelets, lanes.lane_support()), lanes.samples_drawn,
+            dict(lanes.timings))
+
+
+def with_support(best: Intersection, lanelets: list[Lanelet], lane_support: dict | None):
+    """Fill ``Arm.support`` (vehicle passages) in ``best`` and return ``lanelets``.
+
+    With trajectories (``lane_support`` from the lane step): the trajectory parts on the
+    arm's entering and leaving lanes. Without: the passages behind the topology step's
+    arm confidence ``1 - exp(-passages / 3)`` (TopologyEstimator.best), inverted; the
+    lanelets of such an arm take its confidence (no per-lane count without tracks).
+    """
+    for i, arm in enumerate(best.arms):
+        if lane_support is not None:
+            arm.support = float(sum(n for lid, n in lane_support.items()
+                                    if lid.startswith(f'a{i}_')))
+        else:
+            arm.support = float(min(-3.0 * np.log(max(1.0 - arm.confidence, 1e-300)), 1e6))
+    if lane_support is None:
+        for ll in lanelets:
+            ll.confidence = float(best.arms[ll.arm].confidence)
+    return lanelets
 
 
 @dataclass(frozen=True)
@@ -204,6 +232,7 @@ class OnlineEstimator:
         self._approached = False
         self._restart_n, self._races = 0, 0
         self._convergence = ConvergenceTracker(self.config.convergence)
+        self._observability, self._obs_t = None, -np.inf
         self.result = EstimateResult(None, [])
 
     @property
@@ -328,15 +357,23 @@ class OnlineEstimator:
             self._topo.run(n_samples=cfg.topology_samples)
         t1 = time.perf_counter()
         best = self._topo.best
+        # before the lane step, whose wall deadline then absorbs it (at lane cadence)
+        if dirty and now - self._obs_t >= cfg.lane_period or self._observability is None:
+            self._observability, self._obs_t = assess(dets), now
+        t2 = time.perf_counter()
         lanelets = self._tick_lanes(best, dets, now, deadline - lanes_reserve_s if wall_budget else None,
                                     total)
-        t2 = time.perf_counter()
+        if best is not None:
+            with_support(best, lanelets, self._lanes.lane_support()
+                         if self._lane_key and cfg.lanes_enabled and dets.has_tracks else None)
+        t3 = time.perf_counter()
         sampler_state = self._topo.state
         self.result = EstimateResult(
-            best, lanelets, {'topology': (t1 - t0) * 1e3, 'lanes': (t2 - t1) * 1e3, 'total': (t2 - t0) * 1e3},
+            best, lanelets, {'topology': (t2 - t0) * 1e3, 'lanes': (t3 - t2) * 1e3,
+                             'total': (t3 - t0) * 1e3},
             self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_key else 0,
             self._topo.best_log_posterior, self._convergence.update(now, sampler_state, best),
-            len(dets), self._lanes_updated, sampler_state)
+            len(dets), self._lanes_updated, sampler_state, observability=self._observability)
         return self.result
 
     def _restart(self, dets: Detections, topo_end: float | None, total: float) -> None:

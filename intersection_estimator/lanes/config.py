@@ -13,6 +13,14 @@ _RANGES = {
     'connector_min_stations': (3, 1000, 'fewest support points of a connector'),
     'connector_arc': (0, 1, '1: connectors start as arc-like cubic Bezier curves tangent to '
                           'their lanes, 0: straight (paper)'),
+    'connector_traffic': (0, 1, '1: connectors shaped by their traffic (lanes/spline.py, cubic '
+                              'B-spline least squares), the arc/straight start only without it'),
+    'traffic_presmooth': (1, 51, 'moving-average length of the trajectory pieces [points]'),
+    'traffic_ctrl_spacing': (0.5, 50.0, 'chord per control point of a traffic connector [m]'),
+    'traffic_smooth': (0.0, 1e6, 'second-difference penalty on its control points'),
+    'traffic_min_points': (3, 10**6, 'fewest trajectory points to shape a connector'),
+    'traffic_select': (0.0, 1000.0, 'the fit replaces the start shape only when better by this '
+                       'per parameter (2: Akaike; 0: always)'),
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
     'stop_step': (0.01, 5.0, 'grid step of the stop-distance search [m]'),
@@ -80,6 +88,12 @@ class LaneConfig:
     connector_spacing: float = 1.0
     connector_min_stations: int = 6
     connector_arc: int = 1
+    connector_traffic: int = 0
+    traffic_presmooth: int = 5
+    traffic_ctrl_spacing: float = 4.0
+    traffic_smooth: float = 10.0
+    traffic_min_points: int = 10
+    traffic_select: float = 2.0
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25

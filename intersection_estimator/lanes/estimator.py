@@ -318,6 +318,29 @@ class LaneCourseEstimator:
         self.samples_drawn += drawn
         return drawn
 
+    def lane_support(self) -> dict:
+        """Lanelet id -> trajectories assigned to it (entering / leaving part, or both
+        for a connector): the traffic each lane rests on (beyond the paper)."""
+        out: dict = {}
+        for tr in getattr(self, '_trajs', []):
+            ids = [lane_id(tr.lane_in[0], ENTERING, tr.lane_in[1]) if tr.lane_in else None,
+                   lane_id(tr.lane_out[0], LEAVING, tr.lane_out[1]) if tr.lane_out else None]
+            if tr.lane_in and tr.lane_out:
+                ids.append(connector_id(*tr.lane_in, *tr.lane_out))
+            for i in ids:
+                if i is not None:
+                    out[i] = out.get(i, 0) + 1
+        return out
+
     @property
     def lanelets(self) -> list[Lanelet]:
-        return self.graph.lanelets() if self.graph is not None else []
+        """The lane course; each lanelet with ``support`` (its trajectories) and
+        ``confidence = 1 - exp(-support / 3)`` (the topology arms' rule)."""
+        if self.graph is None:
+            return []
+        sup = self.lane_support()
+        out = self.graph.lanelets()
+        for ll in out:
+            ll.support = int(sup.get(ll.id, 0))
+            ll.confidence = float(1.0 - np.exp(-ll.support / 3.0))
+        return out

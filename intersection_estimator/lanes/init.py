@@ -29,6 +29,7 @@ from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
+from .spline import traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
            'lane_specs', 'lane_id', 'connector_id']
@@ -442,10 +443,12 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
     if not connectors:
         return specs, pairs, index
     count: dict = {}
+    driven: dict = {}
     for tr in trajs:
         if tr.lane_in is not None and tr.lane_out is not None:
             key = (tr.lane_in, tr.lane_out)
             count[key] = count.get(key, 0) + 1
+            driven.setdefault(key, []).append(tr.xy)
     for ((a, k), (b, j)), m in sorted(count.items()):
         if m < cfg.min_connector_evidence:
             continue
@@ -454,6 +457,9 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
             continue
         E, O = specs[e], specs[o]
         left, right = _connector_borders(E, O, cfg)
+        if cfg.connector_traffic:
+            shaped = traffic_connector(E, O, driven[((a, k), (b, j))], cfg, (left, right))
+            left, right = shaped if shaped is not None else (left, right)
         n_st = len(left)
         lk = [E.left_keys[-1]] + [None] * (n_st - 2) + [O.left_keys[0]]
         rk = [E.right_keys[-1]] + [None] * (n_st - 2) + [O.right_keys[0]]

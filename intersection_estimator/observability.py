@@ -1,0 +1,234 @@
+"""Do the data show an intersection at all? (beyond the paper; issue 15 part 4)
+
+The topology sampler (paper §II) always explains the data by a center with arms: on a
+straight road it still places a center somewhere along it and reports an intersection.
+This module decides, from the detections alone and independently of the sampler,
+whether any traffic leaves the one axis that a road would have:
+
+1. The *axis*: the dominant driving direction modulo 180 deg (mode of the doubled
+   headings of moving detections; without headings -- radar -- the principal axis of
+   the moving detections' positions, with the road's lateral position followed along
+   it bin by bin).
+2. *Off-axis evidence* ``off_axis``: moving detections whose heading deviates more
+   than ``axis_tol_deg`` from the axis (radar: that lie more than ``corridor_m`` beside
+   it). With track ids: the tracks whose off-axis rows span at least ``min_extent_m``
+   (vehicle passages; a short false track or a lane change is no arm). Without ids:
+   the off-axis travel in stretches of ``min_extent_m`` (:func:`_cell_evidence`).
+   ``on_axis`` likewise for the rows along the axis.
+3. ``intersection_confidence = 1 - 2 ** (-off_axis / need)`` (0.5 at the threshold
+   ``need`` = ``min_off_passages`` for tracks, ``min_off_stretches`` without);
+   state ``'INTERSECTION'`` when ``off_axis >= need``,
+   ``'ROAD'`` when traffic moved (almost) only along the axis, ``'NO_DATA'`` without
+   moving detections.
+
+:func:`assess` is called by the pipeline after the topology step; the estimate keeps
+its arms and lanes (they describe the road) and says ``intersection: false``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+import math
+
+import numpy as np
+
+from .observations import Detections
+
+__all__ = ['ObservabilityConfig', 'Observability', 'assess', 'ROAD', 'INTERSECTION', 'NO_DATA']
+
+ROAD, INTERSECTION, NO_DATA = 'ROAD', 'INTERSECTION', 'NO_DATA'
+
+_RANGES = {
+    'axis_tol_deg': (1.0, 89.0, 'heading farther than this from the axis is off-axis [deg]'),
+    'corridor_m': (1.0, 200.0,
+                   'radar: detections farther than this beside the axis are off-axis [m]'),
+    'ridge_bin_m': (1.0, 200.0, 'radar: bin length of the road ridge along the axis [m]'),
+    'min_extent_m': (0.0, 500.0, 'shortest off-axis stretch of one passage that counts [m]'),
+    'min_speed': (0.0, 50.0, 'slower detections (speed or |Doppler|) are not traffic [m/s]'),
+    'min_off_passages': (0.1, 1000.0, 'tracks: off-axis passages needed for an intersection'),
+    'min_off_stretches': (0.1, 1000.0, 'untracked: off-axis min_extent_m stretches needed'),
+    'cell_m': (0.5, 50.0, 'untracked: side of the squares that off-axis travel is counted in [m]'),
+    'cell_min': (1, 1000, 'untracked: rows of as many stamps that make a square count'),
+    'heading_window': (1, 100, 'tracks without heading: samples either side for the chord'),
+}
+
+
+@dataclass(frozen=True)
+class ObservabilityConfig:
+    """Thresholds of :func:`assess` (``validate()`` names a bad one)."""
+
+    axis_tol_deg: float = 30.0
+    corridor_m: float = 20.0
+    ridge_bin_m: float = 10.0
+    min_extent_m: float = 8.0
+    min_speed: float = 1.0
+    min_off_passages: float = 2.0
+    min_off_stretches: float = 6.0
+    cell_m: float = 4.0
+    cell_min: int = 3
+    heading_window: int = 5
+
+    def validate(self) -> 'ObservabilityConfig':
+        for name, (lo, hi, what) in _RANGES.items():
+            v = getattr(self, name)
+            if not (lo <= v <= hi):
+                raise ValueError(f'ObservabilityConfig.{name}={v!r} outside [{lo}, {hi}] ({what})')
+        return self
+
+
+@dataclass(frozen=True)
+class Observability:
+    """Verdict of :func:`assess`; ``to_json()`` is the ``observability`` key of estimate.json."""
+
+    state: str
+    intersection_confidence: float
+    off_axis: float                # passages (tracks) or min_extent_m stretches (untracked)
+    on_axis: float
+    axis_deg: float | None
+    basis: str                     # 'tracks' | 'headings' | 'positions' | 'none'
+
+    @property
+    def intersection(self) -> bool:
+        return self.state == INTERSECTION
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d['intersection'] = self.intersection
+        return d
+
+
+def _axis_from_headings(h: np.ndarray) -> float:
+    """Mode of the doubled headings (72 bins, circular smoothing), refined by the doubled
+    mean of the headings near it; returns the axis angle in [0, pi)."""
+    d = np.mod(2.0 * h, 2.0 * math.pi)
+    hist = np.bincount((d / (2 * math.pi) * 72).astype(int) % 72, minlength=72).astype(float)
+    sm = sum(np.roll(hist, k) for k in range(-3, 4))
+    peak = (np.argmax(sm) + 0.5) * 2 * math.pi / 72
+    near = np.abs(np.angle(np.exp(1j * (d - peak)))) < math.radians(30.0)
+    z = np.exp(1j * d[near]).sum()
+    return float(np.mod(0.5 * np.angle(z), math.pi))
+
+
+def _deviation(h: np.ndarray, axis: float) -> np.ndarray:
+    """|heading - axis| modulo 180 deg, in [0, pi/2]."""
+    return np.abs(np.angle(np.exp(2j * (h - axis)))) / 2.0
+
+
+def _chord_headings(xy: np.ndarray, tid: np.ndarray, k: int) -> np.ndarray:
+    """Heading of each row from the chord between the rows ``k`` before and after it in
+    the same track (rows sorted by track, then time)."""
+    n = len(xy)
+    i = np.arange(n)
+    starts = np.r_[0, np.flatnonzero(np.diff(tid)) + 1]
+    first = np.repeat(starts, np.diff(np.r_[starts, n]))
+    last = np.repeat(np.r_[starts[1:], n] - 1, np.diff(np.r_[starts, n]))
+    a, b = np.maximum(i - k, first), np.minimum(i + k, last)
+    d = xy[b] - xy[a]
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+def _extent(xy: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
+    """Bounding-box diagonal of each label's points."""
+    lo = np.full((n, 2), np.inf)
+    hi = np.full((n, 2), -np.inf)
+    np.minimum.at(lo, labels, xy)
+    np.maximum.at(hi, labels, xy)
+    return np.where(np.isfinite(lo[:, 0]), np.linalg.norm(hi - lo, axis=1), 0.0)
+
+
+def _cell_evidence(xy: np.ndarray, t: np.ndarray, cfg: ObservabilityConfig) -> float:
+    """Untracked rows: off-axis travel in stretches of ``min_extent_m``. The ground is cut
+    into ``cell_m`` squares; a square counts when ``cell_min`` rows of as many different
+    stamps fall into it (a vehicle crossing it at urban speed leaves one row per cycle;
+    clutter with random positions rarely does) -> occupied squares x cell_m / min_extent_m."""
+    if len(xy) == 0:
+        return 0.0
+    c = np.floor(xy / cfg.cell_m).astype(np.int64)
+    c -= c.min(axis=0)
+    code = c[:, 0] * (int(c[:, 1].max()) + 1) + c[:, 1]
+    _, ti = np.unique(t, return_inverse=True)
+    pair = np.unique(code * (int(ti.max()) + 1) + ti)          # (square, stamp) once each
+    per_cell = np.unique(pair // (int(ti.max()) + 1), return_counts=True)[1]
+    return float((per_cell >= cfg.cell_min).sum()) * cfg.cell_m / max(cfg.min_extent_m, 1e-9)
+
+
+def _passages(xy, ids, off, cfg) -> tuple[float, float]:
+    """(off-axis, on-axis) passages: tracks whose off-axis / on-axis rows span
+    ``min_extent_m``."""
+    if len(ids) == 0:
+        return 0.0, 0.0
+    _, lab = np.unique(ids, return_inverse=True)
+    n = int(lab.max()) + 1
+    ext_off = _extent(xy[off], lab[off], n)
+    ext_on = _extent(xy[~off], lab[~off], n)
+    return float((ext_off >= cfg.min_extent_m).sum()), float((ext_on >= cfg.min_extent_m).sum())
+
+
+def _moving(dets: Detections, cfg: ObservabilityConfig) -> np.ndarray:
+    """Rows that are traffic: speed (or |Doppler| for radar rows) >= ``min_speed`` where
+    known, every row where neither is."""
+    ok = np.isfinite(dets.xy).all(axis=1) & np.isfinite(dets.t)
+    sp = np.where(np.isfinite(dets.speed), dets.speed, np.abs(dets.doppler))
+    return ok & ~(np.isfinite(sp) & (sp < cfg.min_speed))
+
+
+def _by_heading(dets: Detections, cfg: ObservabilityConfig):
+    """Axis and evidence from headings (tracked: passages per track id, else cells)."""
+    tracked = dets.track_id >= 0
+    if tracked.any():
+        d = dets.subset(tracked)
+        d = d.subset(np.lexsort((d.t, d.track_id)))
+        h = d.heading.copy()
+        miss = ~np.isfinite(h)
+        if miss.any():
+            h[miss] = _chord_headings(d.xy, d.track_id, cfg.heading_window)[miss]
+        axis = _axis_from_headings(h)
+        off = _deviation(h, axis) > math.radians(cfg.axis_tol_deg)
+        return axis, _passages(d.xy, d.track_id, off, cfg), 'tracks'
+    d = dets.subset(np.isfinite(dets.heading))
+    axis = _axis_from_headings(d.heading)
+    off = _deviation(d.heading, axis) > math.radians(cfg.axis_tol_deg)
+    return axis, (_cell_evidence(d.xy[off], d.t[off], cfg),
+                  _cell_evidence(d.xy[~off], d.t[~off], cfg)), 'headings'
+
+
+def _by_position(dets: Detections, cfg: ObservabilityConfig):
+    """Radar: the principal axis of the positions, the road's lateral position along it
+    as the median per ``ridge_bin_m`` bin (follows a bend), off-axis = farther than
+    ``corridor_m`` from that ridge; evidence in cells."""
+    xy = dets.xy
+    c = np.median(xy, axis=0)
+    u = np.linalg.eigh(np.cov((xy - c).T))[1][:, 1]
+    s, lat = (xy - c) @ u, (xy - c) @ np.array([-u[1], u[0]])
+    b = np.floor((s - s.min()) / cfg.ridge_bin_m).astype(np.int64)
+    mids, ridge = [], []
+    for k in np.unique(b):
+        m = b == k
+        if m.sum() >= 10:
+            mids.append(float(np.median(s[m])))
+            ridge.append(float(np.median(lat[m])))
+    keep = np.abs(lat - np.interp(s, mids, ridge)) <= cfg.corridor_m if mids else \
+        np.ones(len(xy), bool)
+    axis = float(np.mod(math.atan2(u[1], u[0]), math.pi))
+    return axis, (_cell_evidence(xy[~keep], dets.t[~keep], cfg),
+                  _cell_evidence(xy[keep], dets.t[keep], cfg)), 'positions'
+
+
+def assess(dets: Detections | None, cfg: ObservabilityConfig | None = None) -> Observability:
+    """Observability of an intersection in ``dets`` (module docstring)."""
+    cfg = (cfg or ObservabilityConfig()).validate()
+    if dets is None or len(dets) == 0:
+        return Observability(NO_DATA, 0.0, 0, 0, None, 'none')
+    dets = dets.subset(_moving(dets, cfg))
+    if len(dets) < 2:
+        return Observability(NO_DATA, 0.0, 0, 0, None, 'none')
+    if dets.has_tracks or dets.has_heading:
+        axis, (off, on), basis = _by_heading(dets, cfg)
+    else:
+        axis, (off, on), basis = _by_position(dets, cfg)
+    if off == 0 and on == 0:
+        return Observability(NO_DATA, 0.0, 0, 0, math.degrees(axis), basis)
+    need = cfg.min_off_passages if basis == 'tracks' else cfg.min_off_stretches
+    conf = 1.0 - 2.0 ** (-off / need)
+    state = INTERSECTION if off >= need else ROAD
+    return Observability(state, float(conf), off, on, math.degrees(axis), basis)
