@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from road_scenes import straight_road
-from topology_scenes import easy_intersection, scene
+from topology.scenes import easy_intersection, scene
 
 from intersection_estimator.estimate_io import dumps, estimate_to_dict
 from intersection_estimator.observability import (INTERSECTION, NO_DATA, ROAD,
