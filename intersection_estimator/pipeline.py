@@ -112,16 +112,16 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
 
 
 def _phases(topo, marks, lane_s: dict) -> dict:
-    """Where :func:`estimate`'s time went [ms]: the phases timed around the estimators' calls,
-    the lane course's own timers, and any phase timers the topology estimator keeps
-    (``TopologyEstimator.timings`` [s], when it has them). ``topology_setup``: the first
-    ``set_observations`` (preprocessing and data-driven initialisation, §II-A); ``topology_run``:
-    chain samples, refits, descent and re-preprocessing together (§II-B/C; the topology
-    estimator has no timers inside); ``topology_report``: the reported MAP estimate."""
+    """Where :func:`estimate`'s time went [ms], in disjoint phases that add up to its time:
+    the topology estimator's own timers (``TopologyEstimator.timings``: ``topology_preprocess``,
+    ``_rescore``, ``_initialise``, ``_chain``, ``_refit``, ``_descent``; §II-A to II-C) and
+    ``topology_other`` (the rest of its ``set_observations`` + ``run``), ``topology_report``
+    (the reported MAP estimate), the lane course's timers and ``lanes_other``."""
     t0, ta, t1, tb, t2 = marks
-    out = {'topology_setup': (ta - t0) * 1e3, 'topology_run': (t1 - ta) * 1e3,
-           'topology_report': (tb - t1) * 1e3}
-    out.update({f'topology_{k}': 1e3 * v for k, v in dict(getattr(topo, 'timings', {}) or {}).items()})
+    timers = {f'topology_{k}': 1e3 * v for k, v in dict(getattr(topo, 'timings', {}) or {}).items()}
+    out = dict(timers)
+    out['topology_other'] = max((t1 - t0) * 1e3 - sum(timers.values()), 0.0)
+    out['topology_report'] = (tb - t1) * 1e3
     lanes = {f'lanes_{k}': 1e3 * v for k, v in lane_s.items()}
     out.update(lanes)
     out['lanes_other'] = max((t2 - tb) * 1e3 - sum(lanes.values()), 0.0)

@@ -243,8 +243,9 @@ def profile_summary(cases: list[dict], ref_ms) -> dict:
                                         for k in counters}, 'cases': len(rows)}
 
 
-_ORDER = ('topology_setup', 'topology_run', 'topology_report', 'lanes_initialise', 'lanes_mcmc',
-          'lanes_refine', 'lanes_other')
+_ORDER = ('topology_preprocess', 'topology_initialise', 'topology_chain', 'topology_refit',
+          'topology_descent', 'topology_rescore', 'topology_other', 'topology_report',
+          'lanes_initialise', 'lanes_mcmc', 'lanes_refine', 'lanes_other')
 
 
 def _phase_order(k):

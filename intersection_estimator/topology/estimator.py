@@ -71,6 +71,13 @@ class TopologyEstimator:
         self._rep_key = self._rep = None       # cache of the reported estimate
         self.samples_drawn = 0
         self.preprocess_count = 0
+        #: wall time [s] per phase since the reset, disjoint: ``preprocess`` (observation
+        #: building, §II-A), ``rescore`` (chains re-scored on new observations), ``initialise``
+        #: (data-driven start, §II-A, without its preprocessing), ``chain`` (the samples,
+        #: Algorithm 1), ``refit`` (:mod:`.refit`), ``descent`` (:mod:`.descent`).
+        #: Read by ``bench --profile``; timing only, no effect on the estimate.
+        self.timings: dict[str, float] = dict.fromkeys(
+            ('preprocess', 'rescore', 'initialise', 'chain', 'refit', 'descent'), 0.0)
 
     def set_observations(self, dets: Detections) -> None:
         """Replace the observation window; keep the chains (warm start, re-heated)."""
@@ -172,7 +179,21 @@ class TopologyEstimator:
         """The chain with the best state so far (the first on ties)."""
         return max(self._chains, key=lambda c: c.best_lpost)
 
+    def _timed(self, phase: str, t0: float) -> float:
+        """Add the time since ``t0`` to ``timings[phase]``; returns now."""
+        now = time.perf_counter()
+        self.timings[phase] += now - t0
+        return now
+
     def _initialise(self) -> None:
+        t0 = time.perf_counter()
+        inner = self.timings['preprocess'] + self.timings['rescore'] + self.timings['refit']
+        self._initialise_chains()
+        spent = time.perf_counter() - t0
+        inner = self.timings['preprocess'] + self.timings['rescore'] + self.timings['refit'] - inner
+        self.timings['initialise'] += spent - inner
+
+    def _initialise_chains(self) -> None:
         cfg = self.cfg
         init = initial_state(self._dets, cfg, self._pcfg, self._preprocessed)
         if init is None:
@@ -184,8 +205,10 @@ class TopologyEstimator:
         near = np.hypot(*(S[CX:CY + 1] - obs_center)) <= cfg.recenter_threshold
         self._preprocess(S[CX:CY + 1].copy(), obs if near else None, obs_center)
         if cfg.polish_samples == 0:
+            t = time.perf_counter()
             for c in self._chains:
                 refit_chain(self._post, c, cfg.refit_sweeps)
+            self._timed('refit', t)
 
     def _preprocess(self, center, obs=None, obs_center=None) -> None:
         """(Re-)preprocess around ``center`` (or adopt ``obs`` made around ``obs_center``)
@@ -193,6 +216,7 @@ class TopologyEstimator:
         if obs is None:
             obs = self._preprocessed(center, arm_angles(self._best_chain().best_S))
             obs_center = center
+        t = time.perf_counter()
         self._post = Posterior(self._tables, obs)
         self._pp_center = np.asarray(obs_center, float).copy()
         self.preprocess_count += 1
@@ -202,11 +226,15 @@ class TopologyEstimator:
         best = self._best_chain()
         self._ref_best = best.best_lpost
         self._last_improve = best.step
+        self._timed('rescore', t)
 
     def _preprocessed(self, center, angles) -> ObservationSet:
+        t = time.perf_counter()
         if self._radar is None:
             self._radar = radar_rows(self._dets, self._pcfg)
-        return preprocess(self._dets, center, self._pcfg, angles, self._radar)
+        obs = preprocess(self._dets, center, self._pcfg, angles, self._radar)
+        self._timed('preprocess', t)
+        return obs
 
     def _advance(self, m: int, deadline: float) -> int:
         """``m`` samples of every chain (+ refits, + the descent when the schedule ends),
@@ -218,13 +246,17 @@ class TopologyEstimator:
         self._polish_left = max(0, self._polish_left - m)
         drawn = 0
         for c in self._chains:
+            t = time.perf_counter()
             post.advance(c, m, temps, int(self._rng.integers(0, 2 ** 31 - 1)), P)
+            t = self._timed('chain', t)
             if was_polishing and self._polish_left == 0:
                 refit_chain(post, c, cfg.refit_sweeps)
             elif cfg.refit_every and c.step // cfg.refit_every != (c.step - m) // cfg.refit_every:
                 refit_chain(post, c, cfg.refit_sweeps)
+            t = self._timed('refit', t)
             if c.step - m < cfg.anneal_samples <= c.step:
                 drawn += self._descend(c, deadline)
+                self._timed('descent', t)
             drawn += m
         self.samples_drawn += drawn
         self._since_data += m
