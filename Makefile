@@ -13,7 +13,7 @@ PKG_SRC := setup.py setup.cfg package.xml $(wildcard resource/*) $(wildcard conf
            $(shell find intersection_estimator msg_adapters -name '*.py' -o -name '*.msg' 2>/dev/null) \
            $(wildcard bags/*/* bags/*)
 
-# DDS on this host only, fast discovery, logs out of $HOME (see docs/ros_environment.md).
+# DDS on this host only, fast discovery, logs out of $HOME (see README, "Use it with ROS 2").
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_localhost.xml
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)

@@ -26,11 +26,14 @@ SUBCOMMANDS = (
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse with one-line errors (``PROG: error: ...``, exit 2) and help text without
+    """argparse with one-line errors (``PROG: error: ...``, exit ``usage_exit``: 2 as argparse,
+    unless a subcommand documents another code for bad arguments) and help text without
     Sphinx markup (the subcommands' descriptions are their module docstrings)."""
 
+    usage_exit = 2
+
     def error(self, message: str):
-        self.exit(2, f'{self.prog}: error: {" ".join(message.split())}\n')
+        self.exit(self.usage_exit, f'{self.prog}: error: {" ".join(message.split())}\n')
 
     def format_help(self) -> str:
         return plain_doc(super().format_help())

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from collections import deque
 import gc
+import os
+from pathlib import Path
 import threading
 import time
 
@@ -272,6 +274,7 @@ class EstimatorCore:
                                                          self._marker_keys)
                 self.pub_markers.publish(markers)
                 self._lanes_out = True
+                self._write_osm(result.lanelets)
         self._tick_ms.append((time.perf_counter() - t0) * 1e3)
         self._tick_ms = self._tick_ms[-100:]
         if result is not None and result.timing_ms:   # what ticks spend besides estimating:
@@ -290,6 +293,23 @@ class EstimatorCore:
             self.pub_markers.publish(clear_markers_msg(self.types, header))
             self.pub_lanelets.publish(lanelets_msg(self.types, header, [], 0))
             self._marker_keys, self._lanes_out = frozenset(), False
+            self._write_osm([])
+
+    def _write_osm(self, lanelets) -> None:
+        """The lane course as a Lanelet2 map at ``osm_path`` (when set): written beside it
+        and renamed, so a planner that reloads the file never reads half a map. A failure
+        (folder missing, no permission) is logged, rate-limited, and the node goes on."""
+        path = self.values['osm_path']
+        if not path:
+            return
+        from .export.osm import write_osm
+        target = Path(path)
+        tmp = target.with_name(f'.{target.stem}.tmp.osm')
+        try:
+            write_osm(tmp, lanelets, origin_latlon=self.values['geo_origin'])
+            os.replace(tmp, target)
+        except (OSError, RuntimeError, ValueError) as exc:
+            self.log.warn('osm_path', f'osm_path={path}: could not write the map: {exc}')
 
     def _overheads(self) -> tuple[float, float]:
         """[ms] the median overhead of recent plain ticks, the worst of recent ticks that

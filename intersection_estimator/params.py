@@ -74,6 +74,10 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('reset_distance', 25.0, 'ego past the center by this -> start on the next intersection [m]',
               1.0, 1000.0),
     ParamSpec('seed', 0, 'seed of every random draw', 0, 2**31 - 1),
+    ParamSpec('geo_origin', [49.0, 8.4], 'latitude, longitude [deg] of the fixed frame origin, written '
+              'into the Lanelet2 OSM export (its <geoReference>; nodes are projected around it)'),
+    ParamSpec('osm_path', '', "write the lane course as a Lanelet2 OSM map to this file on every lane "
+              "update ('' = off; written to a temporary file and renamed, so a reader never sees half a map)"),
 )
 
 _BY_NAME = {p.name: p for p in PARAMS}
@@ -122,6 +126,11 @@ def check_all(values: dict) -> list[str]:
     """Every problem with a full parameter set, including cross-parameter ones."""
     errors = [e for n, v in values.items() if (e := check(n, v))]
     if not errors:
+        from .export.osm import check_origin
+        try:
+            check_origin(values['geo_origin'], 'geo_origin')
+        except ValueError as exc:
+            errors.append(str(exc))
         n = len(values['mount_frames'])
         for k in ('mount_x', 'mount_y', 'mount_yaw'):
             if len(values[k]) != n:

@@ -38,7 +38,7 @@ import time
 
 from . import params as P
 from .bagio import BagError, BagWriter, open_bags, typestore
-from .ingest import Ingest, tick
+from .ingest import TF_TOPICS, TF_TYPE, Ingest, tick
 from .pipeline import OnlineEstimator
 from .replay_report import (EXIT_DAMAGED, EXIT_NO_INTERSECTION, EXIT_OK, EXIT_UNUSABLE, Intersection,
                             ReplaySummary, WarningLog, why_no_intersection)
@@ -104,15 +104,15 @@ class _Recorder(OnlineEstimator):
     """The node's estimator, keeping the estimate of every intersection it finished (the
     result before each reset: ego passed, time base moved)."""
 
-    def __init__(self, config, seed, clock):
+    def __init__(self, config, seed, clock, ego):
         self.finished: list[Intersection] = []
-        self.ending, self.clock = 'time_base_reset', clock
+        self.ending, self.clock, self.ego = 'time_base_reset', clock, ego
         super().__init__(config, seed)
 
     def reset(self) -> None:
         r = getattr(self, 'result', None)
         if r is not None and r.intersection is not None:
-            self.finished.append(Intersection(r, self.window(), self.ending, self.clock()))
+            self.finished.append(Intersection(r, self.window(), self.ending, self.clock(), self.ego()))
         self.ending = 'time_base_reset'
         super().reset()
 
@@ -136,14 +136,17 @@ class _Run:
 
 def replay(bags: list[str], out: str | Path, *, params_file: str | None = None, seed: int | None = None,
            budget_mode: str = 'samples', progress: bool = True, write_outputs: bool = True,
-           log=None) -> ReplaySummary:
+           log=None, origin: tuple[float, float] | None = None) -> ReplaySummary:
     """Run the pipeline over ``bags``; raises :class:`BagError` with a one-line reason.
+
+    ``origin``: (latitude, longitude) of the fixed frame's origin for ``lanelets.osm``
+    (default: the ``geo_origin`` parameter).
 
     ``log``: called with each warning line (the ingest warnings the node would log, at most
     one per reason per 5 s of bag time; notes on the input) -- default: kept in the summary only.
     """
     t_start = time.perf_counter()
-    values = _values(params_file, seed, {})
+    values = _values(params_file, seed, {} if origin is None else {'geo_origin': [float(v) for v in origin]})
     out, wlog = Path(out), WarningLog(log)
     with open_bags(bags) as reader:
         for note in reader.notes:
@@ -155,7 +158,7 @@ def replay(bags: list[str], out: str | Path, *, params_file: str | None = None, 
         try:
             run = _start(values, tmp, budget_mode == 'wall', wlog)
             total = sum(t.count for t in reader.topics if t.topic in roles)
-            _feed(run, reader, roles, progress, total)
+            _feed(run, reader, roles, _tf_topics(reader), progress, total)
             damage = [str(p) for p in reader.problems]
             if run.messages < total:   # corrupt bytes inside a readable chunk: skipped, not silently
                 damage.append(f'{total - run.messages} of {total} indexed messages could not be read')
@@ -172,16 +175,36 @@ def replay(bags: list[str], out: str | Path, *, params_file: str | None = None, 
 def _start(values, tmp, wall_budget: bool, wlog) -> _Run:
     from msg_adapters.types import RosbagsTypes
     ingest = Ingest(values, RosbagsTypes(typestore()))
-    estimator = _Recorder(P.pipeline_config(values), values['seed'], lambda: ingest.latest_stamp)
+    estimator = _Recorder(P.pipeline_config(values), values['seed'], lambda: ingest.latest_stamp,
+                          lambda: _ego(ingest))
     writer = BagWriter(tmp / '.output_bag') if tmp is not None else None
     return _Run(ingest, estimator, writer, values, wall_budget, wlog)
 
 
-def _feed(run: _Run, reader, roles: dict, progress: bool, total: int) -> None:
-    """Every message through Ingest, ticks at the node's period in bag time."""
+def _ego(ingest: Ingest) -> tuple | None:
+    """The latest ego pose (x, y, yaw) in the fixed frame, None before odometry."""
+    p = ingest.ego.latest
+    return None if p is None else (float(p.x), float(p.y), float(p.yaw))
+
+
+def _tf_topics(reader) -> dict[str, bool]:
+    """The bag's /tf and /tf_static topics (tf2_msgs/TFMessage) -> static?: sensor mounts and
+    map -> odom for Ingest, as the node subscribes to them."""
+    return {t.topic: TF_TOPICS[t.topic] for t in reader.topics
+            if t.topic in TF_TOPICS and t.msgtype == TF_TYPE}
+
+
+def _feed(run: _Run, reader, roles: dict, tf: dict, progress: bool, total: int) -> None:
+    """Every message through Ingest (``tf`` topics to its TF buffer), ticks at the node's
+    period in bag time."""
     period_ns = int(round(run.values['timer_period'] * 1e9))
     next_tick = None
-    for m in _progress(reader.messages(topics=sorted(roles)), progress, total):
+    total += sum(t.count for t in reader.topics if t.topic in tf)
+    for m in _progress(reader.messages(topics=sorted(set(roles) | set(tf))), progress, total):
+        if m.topic in tf:
+            run.ingest.handle_tf(m.msg, tf[m.topic])
+            run.log.emit(run.ingest.pop_warnings(), m.t)
+            continue
         run.messages += 1
         run.detections += run.ingest.handle(roles[m.topic], m.msg, run.estimator)
         run.log.emit(run.ingest.pop_warnings(), m.t)
@@ -239,7 +262,8 @@ def _finish(run: _Run, tmp, deterministic: bool, truncated: str) -> ReplaySummar
     last = est.result if run.ticks else None
     done = list(est.finished)
     if last is not None and last.intersection is not None:
-        done.append(Intersection(last, est.window(), 'end_of_input', run.ingest.latest_stamp))
+        done.append(Intersection(last, est.window(), 'end_of_input', run.ingest.latest_stamp,
+                                 _ego(run.ingest)))
     ing = run.ingest
     why = '' if done else why_no_intersection(ing.received, ing.dropped, run.detections, run.messages)
     summary = ReplaySummary(run.messages, run.ticks, done[-1].result if done else last, {}, dict(ing.dropped),
@@ -277,13 +301,15 @@ def _write_files(out: Path, summary: ReplaySummary, values, deterministic: bool)
         return {'estimate': str(write_estimate(out / 'estimate.json', None, [], stats))}
     files = {}
     for k, item in enumerate(summary.intersections):
-        files = _write_one(out / 'intersections' / f'{k:02d}', item, dict(counts, index=k), deterministic)
+        files = _write_one(out / 'intersections' / f'{k:02d}', item, dict(counts, index=k), deterministic,
+                           tuple(values['geo_origin']), values['fixed_frame'])
     for key, path in list(files.items()):
         files[key] = str(shutil.copy2(path, out / Path(path).name))
     return files
 
 
-def _write_one(folder: Path, item: Intersection, counts: dict, deterministic: bool) -> dict:
+def _write_one(folder: Path, item: Intersection, counts: dict, deterministic: bool, origin: tuple,
+               frame: str) -> dict:
     from .estimate_io import write_estimate
     from .export.osm import write_osm
     from .export.plot import plot_estimate
@@ -294,8 +320,10 @@ def _write_one(folder: Path, item: Intersection, counts: dict, deterministic: bo
         # same bag + seed -> byte-identical estimate.json: no wall time in it (the summary has it)
         stats['elapsed_s'] = 0.0
     return {'estimate': str(write_estimate(folder / 'estimate.json', r.intersection, r.lanelets, stats)),
-            'osm': str(write_osm(folder / 'lanelets.osm', r.lanelets)),
-            'plot': str(plot_estimate(folder / 'estimate.png', r.intersection, r.lanelets, dets=item.window))}
+            'osm': str(write_osm(folder / 'lanelets.osm', r.lanelets, origin_latlon=origin)),
+            'plot': str(plot_estimate(folder / 'estimate.png', r.intersection, r.lanelets, dets=item.window,
+                                      title=f'intersection {counts["index"]:02d} ({item.ended})',
+                                      ego=item.ego, frame=frame, stamp=item.t_end, result=r))}
 
 
 def _temp_dir(out: Path) -> Path:
@@ -336,10 +364,14 @@ _EPILOG = ('exit codes: 0 intersection estimated; 1 unusable input or arguments 
 def register(sub) -> None:
     p = sub.add_parser('replay', help='run the estimator over rosbag2 bags (MCAP, sqlite3)',
                        description=__doc__, epilog=_EPILOG, formatter_class=_raw())
+    p.usage_exit = EXIT_UNUSABLE   # bad arguments: 1 as documented (2 means a damaged bag)
     p.add_argument('bags', nargs='+', help='rosbag2 bag directories or .mcap / .db3 files')
     p.add_argument('--out', default='replay_out', help='output directory (default: replay_out)')
     p.add_argument('--params', help='parameter YAML (default: built-in defaults, topics found by type)')
     p.add_argument('--seed', type=int, help='seed (overrides the params file)')
+    p.add_argument('--origin', type=_origin, metavar='LAT,LON',
+                   help="geo origin of the fixed frame for lanelets.osm (default: the geo_origin parameter, "
+                        "49.0,8.4)")
     p.add_argument('--budget-mode', choices=('samples', 'wall'), default='samples',
                    help='samples: deterministic sample budget per tick (default); wall: the node\'s time budget')
     p.add_argument('--live', action='store_true', help='publish the bag over DDS at bag rate (and /clock) instead')
@@ -353,6 +385,15 @@ def register(sub) -> None:
     d.add_argument('--out', default='demo_out', help='output directory (default: demo_out)')
     d.add_argument('--bag', default=None, help='bag to use (default: the bundled tracked-objects bag)')
     d.set_defaults(func=_demo)
+
+
+def _origin(text: str) -> tuple[float, float]:
+    import argparse
+    from .export.osm import parse_origin
+    try:
+        return parse_origin(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _raw():
@@ -370,7 +411,8 @@ def _main(args) -> int:
             from .live import play
             return play(args.bags, rate=args.rate)
         summary = replay(args.bags, args.out, params_file=args.params, seed=args.seed,
-                         budget_mode=args.budget_mode, progress=not args.quiet, log=_stderr)
+                         budget_mode=args.budget_mode, progress=not args.quiet, log=_stderr,
+                         origin=args.origin)
     except (BagError, ValueError, OSError) as exc:
         _stderr(_one_line(exc))
         return EXIT_UNUSABLE

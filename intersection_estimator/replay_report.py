@@ -32,12 +32,14 @@ REASON_TEXT = {
 @dataclass
 class Intersection:
     """One intersection of a drive: its final estimate, the observations it rests on,
-    why it ended ('ego_passed', 'time_base_reset', 'end_of_input') and when (stamp [s])."""
+    why it ended ('ego_passed', 'time_base_reset', 'end_of_input'), when (stamp [s]) and
+    where the ego was then ((x, y, yaw) in the fixed frame, None without odometry)."""
 
     result: object
     window: object
     ended: str
     t_end: float | None
+    ego: tuple | None = None
 
 
 def why_no_intersection(received: dict, dropped: dict, detections: int, messages: int) -> str:

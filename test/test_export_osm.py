@@ -188,3 +188,10 @@ def test_turn_direction():
     assert turn_direction(np.array([[0, 0], [1, 0], [2, 0]])) == 'straight'
     assert turn_direction(np.array([[0, 0], [1, 0], [1, 1]])) == 'left'
     assert turn_direction(np.array([[0, 0], [1, 0], [1, -1]])) == 'right'
+
+
+def test_an_empty_map_carries_its_origin_and_loads(tmp_path):
+    """After a reset the node writes an empty map: still valid OSM with its geo origin."""
+    path = write_osm(tmp_path / 'empty.osm', [], origin_latlon=(10.5, -20.25))
+    assert read_origin(path) == (10.5, -20.25)
+    assert len(load_osm(path).laneletLayer) == 0

@@ -97,3 +97,27 @@ def test_mount_arrays_are_settable_at_run_time(make_node):
     assert node.ingest.opts.mounts['rear'] == (-1.0, 0.0, 3.14)
     res = node.set_parameters([Parameter('mount_y', Parameter.Type.DOUBLE_ARRAY, array.array('d', [1.0]))])
     assert not res[0].successful and 'mount_y' in res[0].reason
+
+
+def test_osm_path_gets_the_lane_course_with_its_geo_origin_and_is_emptied_on_reset(make_node, tmp_path):
+    from intersection_estimator.export.osm import load_osm, read_origin
+    target = tmp_path / 'maps' / 'live.osm'
+    node = make_node(osm_path=str(target), geo_origin=[48.1, 11.6])
+    node._publish(_result(), 0.0, T_DATA)
+    assert not target.exists()                       # its folder is missing: logged, the node goes on
+    target.parent.mkdir()
+    node._publish(_result(), 0.0, T_DATA + 1.0)
+    assert read_origin(target) == (48.1, 11.6)
+    assert len(load_osm(target).laneletLayer) == len(_result().lanelets)
+    assert not list(target.parent.glob('.*tmp*'))    # written beside it and renamed
+    node.estimator.reset()                           # what "ego passed" does
+    node._publish(None, 0.0, T_DATA + 2.0)
+    assert len(load_osm(target).laneletLayer) == 0
+
+
+def test_bad_geo_origin_is_refused_naming_it(make_node):
+    from rclpy.parameter import Parameter
+    node = make_node()
+    res = node.set_parameters([Parameter('geo_origin', value=[95.0, 8.4])])
+    assert not res[0].successful and 'geo_origin' in res[0].reason
+    assert list(node.values['geo_origin']) == [49.0, 8.4]

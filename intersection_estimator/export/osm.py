@@ -221,7 +221,10 @@ def _write_geo_reference(path: Path, lat: float, lon: float) -> None:
         raise ValueError(f'{path}: lanelet2 wrote no <osm> element')
     ref = (f'\n  <geoReference lat="{lat!r}" lon="{lon!r}" alt="0.0" projector="LocalCartesian" '
            f'generator="intersection_estimator" />')
-    path.write_text(text[:m.end()] + ref + text[m.end():])
+    head = m.group(0)
+    if head.endswith('/>'):          # an empty map: lanelet2 writes <osm ... />
+        head, ref = head[:-2].rstrip() + '>', ref + '\n</osm>'
+    path.write_text(text[:m.start()] + head + ref + text[m.end():])
 
 
 def read_origin(path):
