@@ -10,9 +10,9 @@ never from its position or the worker that ran it; :func:`.fuse.fuse` sorts driv
 identity. So both engines, any worker count and any completion order give the same
 ``changes.json`` bytes.
 
-The estimator is reached through ONE adapter, :func:`drive_estimates`, over today's
-``replay.replay`` summary API (one estimate per drive); when replay keeps every
-intersection a drive passed, only that function changes.
+The estimator is reached through ONE adapter, :func:`drive_estimates`, over the
+``replay.replay`` summary: every intersection the drive passed (``summary.intersections``),
+each matched to the map on its own.
 """
 
 from __future__ import annotations
@@ -64,16 +64,13 @@ def seed_of(identity: str) -> int:
 
 
 def drive_estimates(bag: str, seed: int, params_file: str | None = None):
-    """THE adapter to the replay API: ``([(Intersection, lanelets), ...], damage)``.
-
-    Today's ``replay`` gives one estimate per drive; after the replay issue it gives every
-    intersection the drive passed, and only this function changes.
-    """
+    """THE adapter to the replay API: ``([(Intersection, lanelets), ...], damage)`` for every
+    intersection the drive passed, in drive order."""
     from ..replay import replay
     with tempfile.TemporaryDirectory(prefix='ie_fleet_') as tmp:
         s = replay([bag], tmp, params_file=params_file, seed=seed, progress=False, write_outputs=False)
-    r = s.result
-    ests = [] if r is None or r.intersection is None else [(r.intersection, r.lanelets)]
+    ests = [(i.result.intersection, i.result.lanelets) for i in s.intersections
+            if i.result.intersection is not None]
     return ests, s.truncated
 
 

@@ -64,3 +64,14 @@ def test_replay_node_and_cli_never_import_ray():
     out = subprocess.run([sys.executable, '-c', core], capture_output=True, text=True, timeout=120,
                          cwd=Path(__file__).resolve().parents[2])
     assert out.stdout.split() == ['False'], out.stderr
+
+
+def test_a_drive_through_two_intersections_gives_two_estimates(tmp_path):
+    """The adapter hands on every intersection replay kept, in drive order."""
+    from intersection_estimator.bagio import write_drive_bag
+    from intersection_estimator.fleet.engine import drive_estimates
+    bag = write_drive_bag(tmp_path / 'drive', (3, 5))
+    ests, damage = drive_estimates(str(bag), 0, str(Path(__file__).with_name('fast_params.yaml')))
+    assert not damage and len(ests) == 2
+    (i0, _), (i1, _) = ests
+    assert list(i0.center) != list(i1.center)
