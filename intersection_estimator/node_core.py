@@ -50,7 +50,8 @@ _ARRAY = {str: ParameterType.PARAMETER_STRING_ARRAY, float: ParameterType.PARAME
           int: ParameterType.PARAMETER_INTEGER_ARRAY}
 #: parameters that only take effect at start-up (topics, frames); the rest apply live
 STARTUP_ONLY = frozenset({'radar_topics', 'radar_scan_topics', 'detection_topics', 'object_topics',
-                          'autoware_object_topics', 'odometry_topic', 'fixed_frame', 'timer_period'})
+                          'autoware_object_topics', 'odometry_topic', 'fixed_frame', 'timer_period',
+                          'prior_map'})
 #: inputs: best effort (matches reliable and best-effort publishers, as sensor data QoS), but
 #: a queue deep enough for bursts (several sensors at once, bag playback, a slow tick):
 #: sensor data QoS keeps 5 and drops the rest silently
@@ -142,6 +143,20 @@ class EstimatorCore:
         self._overhead_ms = {False: deque(maxlen=20), True: deque(maxlen=5)}
         self._prev_samples = 0
         self._subs: list = []
+        self.prior = self._load_prior_map(values)
+        self._change_keys: frozenset = frozenset()
+
+    @staticmethod
+    def _load_prior_map(values: dict):
+        """The prior map's intersections (``prior_map`` set) or None; a map that does not
+        load is a ValueError naming the parameter (the node refuses to start)."""
+        if not values['prior_map']:
+            return None
+        from .fleet.live import LiveChanges
+        try:
+            return LiveChanges.load(values['prior_map'], origin=values['geo_origin'])
+        except ValueError as exc:
+            raise ValueError(f"prior_map={values['prior_map']}: {' '.join(str(exc).split())}") from None
 
     def create_inputs(self) -> None:
         """Subscribe every configured input; a topic whose type is not installed is an
@@ -162,12 +177,13 @@ class EstimatorCore:
 
     def create_outputs(self, create) -> None:
         """Publishers through ``create`` (``create_publisher`` or ``create_lifecycle_publisher``)."""
-        from intersection_estimator_msgs.msg import LaneletArray, Topology
+        from intersection_estimator_msgs.msg import LaneletArray, MapChangeArray, Topology
         from visualization_msgs.msg import MarkerArray
         self.pub_topology = create(Topology, '~/topology', LATCHED_QOS)
         self.pub_lanelets = create(LaneletArray, '~/lanelets', LATCHED_QOS)
         self.pub_markers = create(MarkerArray, '~/markers', LATCHED_QOS)
         self.pub_diag = create(DiagnosticArray, '/diagnostics', 10)
+        self.pub_map_changes = create(MapChangeArray, '~/map_changes', LATCHED_QOS)
 
     def destroy_inputs(self) -> None:
         for sub in self._subs:
@@ -275,6 +291,7 @@ class EstimatorCore:
                 self.pub_markers.publish(markers)
                 self._lanes_out = True
                 self._write_osm(result.lanelets)
+                self._publish_map_changes(header, result)
         self._tick_ms.append((time.perf_counter() - t0) * 1e3)
         self._tick_ms = self._tick_ms[-100:]
         if result is not None and result.timing_ms:   # what ticks spend besides estimating:
@@ -294,6 +311,21 @@ class EstimatorCore:
             self.pub_lanelets.publish(lanelets_msg(self.types, header, [], 0))
             self._marker_keys, self._lanes_out = frozenset(), False
             self._write_osm([])
+            self._change_keys = frozenset()          # DELETEALL took the change markers too
+            self._publish_map_changes(header, None)
+
+    def _publish_map_changes(self, header, result) -> None:
+        """The estimate against the prior map (when ``prior_map`` is set): ~/map_changes and
+        the ``map_changes`` markers (stale ones deleted); None (after a reset): no changes."""
+        if self.prior is None:
+            return
+        from msg_adapters.map_changes import map_change_markers, map_changes_msg
+        from .fleet.live import LiveReport
+        report = LiveReport(None) if result is None else self.prior.update(result.intersection, result.lanelets)
+        self.pub_map_changes.publish(map_changes_msg(self.types, header, report))
+        markers, self._change_keys = map_change_markers(self.types, header, report, self._change_keys)
+        if markers.markers:
+            self.pub_markers.publish(markers)
 
     def _write_osm(self, lanelets) -> None:
         """The lane course as a Lanelet2 map at ``osm_path`` (when set): written beside it

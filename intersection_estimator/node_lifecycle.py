@@ -43,7 +43,12 @@ class ManagedIntersectionEstimatorNode(EstimatorCore, LifecycleNode):
         if errors:
             self.get_logger().error('configure failed: invalid parameter(s): ' + '; '.join(errors))
             return TransitionCallbackReturn.FAILURE
-        self.setup_estimator(values)
+        try:
+            self.setup_estimator(values)
+        except ValueError as exc:          # e.g. a prior_map that does not load
+            self.get_logger().error(f'configure failed: {exc}')
+            self.estimator = None
+            return TransitionCallbackReturn.FAILURE
         self.create_outputs(self.create_lifecycle_publisher)
         self.create_inputs()
         return super().on_configure(state)
@@ -70,7 +75,7 @@ class ManagedIntersectionEstimatorNode(EstimatorCore, LifecycleNode):
         if self.estimator is None:
             return
         self.destroy_inputs()
-        for pub in (self.pub_topology, self.pub_lanelets, self.pub_markers, self.pub_diag):
+        for pub in (self.pub_topology, self.pub_lanelets, self.pub_markers, self.pub_diag, self.pub_map_changes):
             self.destroy_lifecycle_publisher(pub)
         self.estimator = None
 

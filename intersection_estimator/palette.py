@@ -31,6 +31,8 @@ RGBA = {
     'virtual_bound': (1.0, 1.0, 1.0, 0.3),
     'arrow': (1.0, 1.0, 1.0, 0.7),
     'text': (1.0, 1.0, 1.0, 1.0),
+    'changed': (0.84, 0.15, 0.16, 1.0),     # map lanes a change concerns (fleet PNG: tab:red)
+    'added': (1.0, 0.5, 0.05, 1.0),         # an arm the map lacks (fleet PNG: tab:orange)
 }
 
 #: the neutral elements on the PNG's white background (white on white would vanish)

@@ -78,6 +78,8 @@ PARAMS: tuple[ParamSpec, ...] = (
               'into the Lanelet2 OSM export (its <geoReference>; nodes are projected around it)'),
     ParamSpec('osm_path', '', "write the lane course as a Lanelet2 OSM map to this file on every lane "
               "update ('' = off; written to a temporary file and renamed, so a reader never sees half a map)"),
+    ParamSpec('prior_map', '', "Lanelet2 OSM map to compare the estimate with ('' = off): changes on "
+              "~/map_changes and markers (namespace map_changes); projected around geo_origin"),
 )
 
 _BY_NAME = {p.name: p for p in PARAMS}

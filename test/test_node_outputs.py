@@ -29,7 +29,7 @@ def make_node(ros_context):
         node = IntersectionEstimatorNode(context=ros_context,
                                          parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
         node.sent = {}
-        for name in ('topology', 'lanelets', 'markers', 'diag'):
+        for name in ('topology', 'lanelets', 'markers', 'diag', 'map_changes'):
             pub = getattr(node, f'pub_{name}')
             pub.publish = (lambda msg, n=name: node.sent.setdefault(n, []).append(msg))
         nodes.append(node)
@@ -121,3 +121,31 @@ def test_bad_geo_origin_is_refused_naming_it(make_node):
     res = node.set_parameters([Parameter('geo_origin', value=[95.0, 8.4])])
     assert not res[0].successful and 'geo_origin' in res[0].reason
     assert list(node.values['geo_origin']) == [49.0, 8.4]
+
+
+def test_prior_map_publishes_map_changes_and_their_markers(make_node, tmp_path):
+    """prior_map set: each lane update compares the estimate with the map (~/map_changes,
+    markers in namespace map_changes); a reset publishes an empty report."""
+    from intersection_estimator.export.osm import write_osm
+    from intersection_estimator.fleet.edits import apply_edit
+    from intersection_estimator.sim import simulate_scenario
+    from msg_adapters.map_changes import NAMESPACE
+    sc = simulate_scenario(1)          # its ground truth as the estimate, the map with one lane moved
+    res = EstimateResult(sc.gt, sc.gt_lanelets, {'total': 1.0}, 100, 10, -5.0, 'CONVERGED', 500, True)
+    moved, _ = apply_edit(sc, 'lane_moved', np.random.default_rng(1))
+    node = make_node(prior_map=str(write_osm(tmp_path / 'prior.osm', moved)))
+    node._publish(res, 0.0, T_DATA)
+    (msg,) = node.sent['map_changes']
+    assert msg.intersection_id and msg.header.stamp.sec == int(T_DATA)
+    assert [c.kind for c in msg.changes] == ['lane_moved'], [c.kind for c in msg.changes]
+    assert any(m.ns == NAMESPACE for arr in node.sent['markers'] for m in arr.markers)
+    node.estimator.reset()
+    node._publish(None, 0.0, T_DATA + 1.0)
+    assert list(node.sent['map_changes'][-1].changes) == []
+
+
+def test_a_prior_map_that_does_not_load_is_refused_naming_it(make_node, tmp_path):
+    bad = tmp_path / 'broken.osm'
+    bad.write_text('<osm><node id="1"')
+    with pytest.raises(ValueError, match='prior_map'):
+        make_node(prior_map=str(bad))

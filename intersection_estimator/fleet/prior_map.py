@@ -91,6 +91,15 @@ class MappedIntersection:
     traffic_side: int = 1
 
 
+def lane_centers(X: MappedIntersection):
+    """``(lanelet id, center line)`` of every mapped lane and connector of ``X``."""
+    for a in X.arms:
+        for l in a.lanes_in + a.lanes_out:
+            yield l.id, l.center
+    for c in X.connectors:
+        yield c.id, c.center
+
+
 def _projector(kind: str, origin):
     from lanelet2.io import Origin
     from lanelet2.projection import LocalCartesianProjector, UtmProjector

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .changes import KINDS
+from .prior_map import lane_centers
 
 __all__ = ['SCHEMA', 'changes_doc', 'write_changes', 'plot_changes', 'summary_lines']
 
@@ -78,14 +79,6 @@ def write_changes(path, doc: dict) -> Path:
     return path
 
 
-def _map_lanes(X):
-    for a in X.arms:
-        for l in a.lanes_in + a.lanes_out:
-            yield l.id, l.center
-    for c in X.connectors:
-        yield c.id, c.center
-
-
 def plot_changes(path, X, inter: dict, estimates: list) -> Path:
     """Estimates (blue) over the prior map (grey), changed map lanes red, added arms orange."""
     import matplotlib
@@ -93,7 +86,7 @@ def plot_changes(path, X, inter: dict, estimates: list) -> Path:
     import matplotlib.pyplot as plt
     changed = {i for c in inter['changes'] for i in c['map_lanes']}
     fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
-    for lid, c in _map_lanes(X):
+    for lid, c in lane_centers(X):
         red = lid in changed
         ax.plot(c[:, 0], c[:, 1], color='tab:red' if red else '0.6', lw=2.5 if red else 1.0, zorder=3 if red else 1)
     for _, _, lanes in estimates:
