@@ -136,6 +136,14 @@ def _extent(xy: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     return np.where(np.isfinite(lo[:, 0]), np.linalg.norm(hi - lo, axis=1), 0.0)
 
 
+def _stamp_index(t: np.ndarray) -> np.ndarray:
+    """Dense index of each row's stamp (equal stamps, equal index): one pass when the rows
+    are in time order, as windows are; a sort otherwise."""
+    if len(t) > 1 and (np.diff(t) >= 0).all():
+        return np.r_[0, np.cumsum(np.diff(t) > 0)]
+    return np.unique(t, return_inverse=True)[1].ravel()
+
+
 def _cell_evidence(xy: np.ndarray, t: np.ndarray, cfg: ObservabilityConfig) -> float:
     """Untracked rows: off-axis travel in stretches of ``min_extent_m``. The ground is cut
     into ``cell_m`` squares; a square counts when ``cell_min`` rows of as many different
@@ -146,9 +154,12 @@ def _cell_evidence(xy: np.ndarray, t: np.ndarray, cfg: ObservabilityConfig) -> f
     c = np.floor(xy / cfg.cell_m).astype(np.int64)
     c -= c.min(axis=0)
     code = c[:, 0] * (int(c[:, 1].max()) + 1) + c[:, 1]
-    _, ti = np.unique(t, return_inverse=True)
-    pair = np.unique(code * (int(ti.max()) + 1) + ti)          # (square, stamp) once each
-    per_cell = np.unique(pair // (int(ti.max()) + 1), return_counts=True)[1]
+    ti = _stamp_index(t)
+    k = int(ti.max()) + 1
+    pair = np.unique(code * k + ti)                # (square, stamp) once each, sorted
+    cell = pair // k                               # sorted too: run lengths = stamps per square
+    starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+    per_cell = np.diff(np.r_[starts, len(cell)])
     return float((per_cell >= cfg.cell_min).sum()) * cfg.cell_m / max(cfg.min_extent_m, 1e-9)
 
 
@@ -192,6 +203,23 @@ def _by_heading(dets: Detections, cfg: ObservabilityConfig):
                   _cell_evidence(d.xy[~off], d.t[~off], cfg)), 'headings'
 
 
+def _bin_medians(bin_m: float, s: np.ndarray, lat: np.ndarray, min_count: int):
+    """Per ``bin_m`` bin of ``s`` (in increasing order) with at least ``min_count`` rows: the
+    medians of ``s`` and of ``lat`` (``numpy.median`` semantics), from one sort of each
+    (a bin's ``lat`` sorted under a key that orders the bins first)."""
+    ss = np.sort(s)
+    b = np.floor((ss - ss[0]) / bin_m).astype(np.int64)
+    starts = np.flatnonzero(np.r_[True, b[1:] != b[:-1]])
+    n = np.diff(np.r_[starts, len(b)])
+    lo, hi = starts + (n - 1) // 2, starts + n // 2
+    rows = np.floor((s - ss[0]) / bin_m).astype(np.int64)
+    width = float(lat.max() - lat.min()) + 1.0
+    key = np.sort(rows * width + (lat - lat.min()))     # bins in order, lat sorted within
+    kl = key - b * width + lat.min()                      # back to lat (b: the sorted rows' bins)
+    ok = n >= min_count
+    return 0.5 * (ss[lo] + ss[hi])[ok], 0.5 * (kl[lo] + kl[hi])[ok]
+
+
 def _by_position(dets: Detections, cfg: ObservabilityConfig):
     """Radar: the principal axis of the positions, the road's lateral position along it
     as the median per ``ridge_bin_m`` bin (follows a bend), off-axis = farther than
@@ -200,14 +228,8 @@ def _by_position(dets: Detections, cfg: ObservabilityConfig):
     c = np.median(xy, axis=0)
     u = np.linalg.eigh(np.cov((xy - c).T))[1][:, 1]
     s, lat = (xy - c) @ u, (xy - c) @ np.array([-u[1], u[0]])
-    b = np.floor((s - s.min()) / cfg.ridge_bin_m).astype(np.int64)
-    mids, ridge = [], []
-    for k in np.unique(b):
-        m = b == k
-        if m.sum() >= 10:
-            mids.append(float(np.median(s[m])))
-            ridge.append(float(np.median(lat[m])))
-    keep = np.abs(lat - np.interp(s, mids, ridge)) <= cfg.corridor_m if mids else \
+    mids, ridge = _bin_medians(cfg.ridge_bin_m, s, lat, min_count=10)
+    keep = np.abs(lat - np.interp(s, mids, ridge)) <= cfg.corridor_m if len(mids) else \
         np.ones(len(xy), bool)
     axis = float(np.mod(math.atan2(u[1], u[0]), math.pi))
     return axis, (_cell_evidence(xy[~keep], dets.t[~keep], cfg),

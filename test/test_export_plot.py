@@ -40,6 +40,7 @@ def test_title_names_frame_state_time_and_samples():
     assert '2023-11-14 22:13:20.250 UTC' in title and '1700000000.250 s' in title
     assert '10000 topology samples' in title and '20000 lane samples' in title
     assert f'{len(dets)} observations' in title and '3 arms' in title
+    assert max(map(len, title.splitlines())) <= 90, title     # fits the figure's width
     # a bag without wall-clock stamps: its own time base, in seconds
     assert 't 42.000 s' in plot_title(stamp=42.0)
     assert plot_title() == 'intersection estimate: no intersection, 0 lanelets'

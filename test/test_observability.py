@@ -6,6 +6,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from road_scenes import straight_road
 from topology.scenes import easy_intersection, scene
@@ -110,3 +112,27 @@ def test_online_estimator_carries_the_verdict():
     res = on.tick(float(sc.duration))
     assert res.observability.state == INTERSECTION
     assert res.stats()['observability']['intersection'] is True
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 400), st.floats(0.5, 50.0))
+def test_bin_medians_equal_numpy_median_per_bin(seed, n, bin_m):
+    """The two-sort ridge medians are numpy.median over each bin (bins of >= min_count rows)."""
+    from intersection_estimator.observability import _bin_medians
+    g = np.random.default_rng(seed)
+    s = np.round(g.uniform(-100, 100, n), int(g.integers(0, 3)))     # ties included
+    lat = np.round(g.normal(0, 20, n), int(g.integers(0, 3)))
+    b = np.floor((s - s.min()) / bin_m).astype(np.int64)
+    want = [(np.median(s[b == k]), np.median(lat[b == k])) for k in np.unique(b) if (b == k).sum() >= 3]
+    mids, ridge = _bin_medians(bin_m, s, lat, min_count=3)
+    np.testing.assert_allclose(mids, [w[0] for w in want], atol=1e-9)
+    np.testing.assert_allclose(ridge, [w[1] for w in want], atol=1e-9)
+
+
+def test_unsorted_stamps_count_like_sorted_ones():
+    from intersection_estimator.observability import ObservabilityConfig, _cell_evidence
+    g = np.random.default_rng(3)
+    xy, t = g.uniform(0, 40, (500, 2)), np.repeat(np.arange(50) * 0.1, 10)
+    o = g.permutation(500)
+    cfg = ObservabilityConfig()
+    assert _cell_evidence(xy, t, cfg) == _cell_evidence(xy[o], t[o], cfg) > 0

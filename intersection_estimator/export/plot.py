@@ -49,7 +49,8 @@ def _stamp_text(stamp: float) -> str:
 
 def plot_title(frame=None, state=None, stamp=None, topology_samples=None, lane_samples=None,
                observations=None, intersection=None, lanelets=()) -> str:
-    """Two-line title: what was estimated, then frame, state, data time and sample counts.
+    """Title lines: what was estimated, then frame, state and data time, then the sample
+    counts (lines short enough for the figure's width).
 
     Parts that are not known (``None``) are left out; the first line is always there.
     """
@@ -57,18 +58,18 @@ def plot_title(frame=None, state=None, stamp=None, topology_samples=None, lane_s
     head = f'intersection estimate: {what}, {len(lanelets)} lanelets'
     if observations is not None:
         head += f', {int(observations)} observations'
-    parts = []
+    where, samples = [], []
     if frame:
-        parts.append(f'frame {frame}')
+        where.append(f'frame {frame}')
     if state:
-        parts.append(f'state {state}')
+        where.append(f'state {state}')
     if stamp is not None and math.isfinite(float(stamp)):
-        parts.append(_stamp_text(float(stamp)))
+        where.append(_stamp_text(float(stamp)))
     if topology_samples is not None:
-        parts.append(f'{int(topology_samples)} topology samples')
+        samples.append(f'{int(topology_samples)} topology samples')
     if lane_samples is not None:
-        parts.append(f'{int(lane_samples)} lane samples')
-    return head + ('\n' + ', '.join(parts) if parts else '')
+        samples.append(f'{int(lane_samples)} lane samples')
+    return '\n'.join([head] + [', '.join(p) for p in (where, samples) if p])
 
 
 def _draw_observations(ax, dets):
