@@ -34,9 +34,17 @@ import math
 
 import numpy as np
 
+from .ranges import check_table
+
 __all__ = ['ConvergenceConfig', 'ConvergenceTracker', 'same_estimate', 'STATES']
 
 STATES = ('NO_DATA', 'CONVERGING', 'CONVERGED')
+
+
+_RANGES = {'enter_s': ('[0, 600]', 'stable this long before CONVERGED [s]'),
+           'exit_s': ('[0, 600]', 'a change must last this long to leave CONVERGED [s]'),
+           'center_tol_m': ('(0, 100]', 'center moves within this are refinement [m]'),
+           'angle_tol_deg': ('(0, 90]', 'arm angle moves within this are refinement [deg]')}
 
 
 @dataclass(frozen=True)
@@ -50,14 +58,7 @@ class ConvergenceConfig:
 
     def validate(self) -> 'ConvergenceConfig':
         """Raise ValueError naming the first parameter outside its allowed range."""
-        checks = [('enter_s', 0.0 <= self.enter_s <= 600.0, 'in [0, 600] s'),
-                  ('exit_s', 0.0 <= self.exit_s <= 600.0, 'in [0, 600] s'),
-                  ('center_tol_m', 0.0 < self.center_tol_m <= 100.0, 'in (0, 100] m'),
-                  ('angle_tol_deg', 0.0 < self.angle_tol_deg <= 90.0, 'in (0, 90] deg')]
-        for name, ok, allowed in checks:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and ok):
-                raise ValueError(f'convergence.{name}={value!r} out of range: must be {allowed}')
+        check_table(self, _RANGES, 'convergence')
         return self
 
 

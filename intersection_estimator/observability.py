@@ -33,23 +33,24 @@ import math
 import numpy as np
 
 from .observations import Detections
+from .ranges import check_table
 
 __all__ = ['ObservabilityConfig', 'Observability', 'assess', 'ROAD', 'INTERSECTION', 'NO_DATA']
 
 ROAD, INTERSECTION, NO_DATA = 'ROAD', 'INTERSECTION', 'NO_DATA'
 
 _RANGES = {
-    'axis_tol_deg': (1.0, 89.0, 'heading farther than this from the axis is off-axis [deg]'),
-    'corridor_m': (1.0, 200.0,
+    'axis_tol_deg': ('[1.0, 89.0]', 'heading farther than this from the axis is off-axis [deg]'),
+    'corridor_m': ('[1.0, 200.0]',
                    'radar: detections farther than this beside the axis are off-axis [m]'),
-    'ridge_bin_m': (1.0, 200.0, 'radar: bin length of the road ridge along the axis [m]'),
-    'min_extent_m': (0.0, 500.0, 'shortest off-axis stretch of one passage that counts [m]'),
-    'min_speed': (0.0, 50.0, 'slower detections (speed or |Doppler|) are not traffic [m/s]'),
-    'min_off_passages': (0.1, 1000.0, 'tracks: off-axis passages needed for an intersection'),
-    'min_off_stretches': (0.1, 1000.0, 'untracked: off-axis min_extent_m stretches needed'),
-    'cell_m': (0.5, 50.0, 'untracked: side of the squares that off-axis travel is counted in [m]'),
-    'cell_min': (1, 1000, 'untracked: rows of as many stamps that make a square count'),
-    'heading_window': (1, 100, 'tracks without heading: samples either side for the chord'),
+    'ridge_bin_m': ('[1.0, 200.0]', 'radar: bin length of the road ridge along the axis [m]'),
+    'min_extent_m': ('[0.0, 500.0]', 'shortest off-axis stretch of one passage that counts [m]'),
+    'min_speed': ('[0.0, 50.0]', 'slower detections (speed or |Doppler|) are not traffic [m/s]'),
+    'min_off_passages': ('[0.1, 1000.0]', 'tracks: off-axis passages needed for an intersection'),
+    'min_off_stretches': ('[0.1, 1000.0]', 'untracked: off-axis min_extent_m stretches needed'),
+    'cell_m': ('[0.5, 50.0]', 'untracked: side of the squares that off-axis travel is counted in [m]'),
+    'cell_min': ('[1, 1000]', 'untracked: rows of as many stamps that make a square count'),
+    'heading_window': ('[1, 100]', 'tracks without heading: samples either side for the chord'),
 }
 
 
@@ -69,10 +70,7 @@ class ObservabilityConfig:
     heading_window: int = 5
 
     def validate(self) -> 'ObservabilityConfig':
-        for name, (lo, hi, what) in _RANGES.items():
-            v = getattr(self, name)
-            if not (lo <= v <= hi):
-                raise ValueError(f'ObservabilityConfig.{name}={v!r} outside [{lo}, {hi}] ({what})')
+        check_table(self, _RANGES)
         return self
 
 

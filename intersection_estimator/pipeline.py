@@ -19,6 +19,7 @@ from .lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
 from .model import Intersection, Lanelet
 from .observability import Observability, assess
 from .observations import Detections
+from .ranges import check_table
 from .topology import TopologyConfig, TopologyEstimator
 
 __all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'mode_of', 'needs_sampling',
@@ -161,6 +162,17 @@ def with_support(best: Intersection, lanelets: list[Lanelet], lane_support: dict
     return lanelets
 
 
+_RANGES = {'window_s': ('(0, inf)', 'observations older than this are forgotten [s]'),
+           'max_observations': ('[100, inf)', 'cap on observations in the window'),
+           'topology_samples': ('[1, inf)', 'topology samples per tick (sample budget)'),
+           'lane_samples': ('[0, inf)', 'lane-course samples per tick (sample budget)'),
+           'budget_s': ('[0.001, 10]', 'wall time per tick [s]'),
+           'lane_share': ('[0, 1)', 'share of the tick budget for the lane course'),
+           'lane_period': ('[0, 60]', 'lane course re-estimated at most this often [s]'),
+           'reset_distance': ('(0, inf)', 'ego past the center by this -> next intersection [m]'),
+           'restart_growth': ('(1, inf)', 'window grown this many times -> restart the chains')}
+
+
 @dataclass(frozen=True)
 class PipelineConfig:
     """Settings of the anytime pipeline (node parameters map 1:1 onto these)."""
@@ -181,18 +193,7 @@ class PipelineConfig:
 
     def validate(self) -> None:
         """Raise ValueError naming the first parameter outside its allowed range."""
-        checks = [('window_s', self.window_s > 0, '> 0'),
-                  ('max_observations', self.max_observations >= 100, '>= 100'),
-                  ('topology_samples', self.topology_samples >= 1, '>= 1'),
-                  ('lane_samples', self.lane_samples >= 0, '>= 0'),
-                  ('budget_s', 0.001 <= self.budget_s <= 10.0, 'in [0.001, 10] s'),
-                  ('lane_share', 0.0 <= self.lane_share < 1.0, 'in [0, 1)'),
-                  ('lane_period', 0.0 <= self.lane_period <= 60.0, 'in [0, 60] s'),
-                  ('reset_distance', self.reset_distance > 0, '> 0'),
-                  ('restart_growth', self.restart_growth > 1.0, '> 1')]
-        for name, ok, allowed in checks:
-            if not ok:
-                raise ValueError(f'{name}={getattr(self, name)!r} out of range: must be {allowed}')
+        check_table(self, _RANGES, 'PipelineConfig')
         self.topology.validate()
         self.lanes.validate()
         self.convergence.validate()

@@ -45,6 +45,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ..evaluate import lane_distance
 from ..model import ENTERING, LEAVING
+from ..ranges import check_table
 from .match import ARM_GATE_DEG, GATE_M, match_arms
 
 __all__ = ['KINDS', 'ChangeConfig', 'Finding', 'DriveView', 'compare', 'arm_passages']
@@ -52,6 +53,13 @@ __all__ = ['KINDS', 'ChangeConfig', 'Finding', 'DriveView', 'compare', 'arm_pass
 KINDS = ('arm_added', 'arm_removed', 'lane_added', 'lane_removed', 'lane_moved',
          'connector_added', 'connector_unused')
 DIRS = {ENTERING: 'in', LEAVING: 'out'}
+
+
+_RANGES = {'gate_m': ('(0, inf)', 'estimate <-> mapped intersection gate [m]'),
+           'arm_gate_deg': ('(0, 180]', 'arm <-> mapped arm gate [deg]'),
+           'moved_m': ('(0, inf)', 'lane moved beyond this mean offset [m]'),
+           'absence_prior': ('(0, 1)', 'prior probability that an element without traffic is gone'),
+           'min_confidence': ('(0, 1)', 'fused confidence to report a change')}
 
 
 @dataclass(frozen=True)
@@ -63,12 +71,7 @@ class ChangeConfig:
     min_confidence: float = 0.5            # fused confidence to report a change
 
     def validate(self) -> None:
-        for name in ('gate_m', 'arm_gate_deg', 'moved_m'):
-            if not getattr(self, name) > 0:
-                raise ValueError(f'{name} must be > 0 (got {getattr(self, name)})')
-        for name in ('min_confidence', 'absence_prior'):
-            if not 0.0 < getattr(self, name) < 1.0:
-                raise ValueError(f'{name} must be in (0, 1) (got {getattr(self, name)})')
+        check_table(self, _RANGES, 'ChangeConfig')
 
 
 @dataclass

@@ -4,79 +4,81 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+from ..ranges import check_table
+
 __all__ = ['LaneConfig']
 
-# name -> (low, high, what); bounds are inclusive
+# name -> (interval, what): see intersection_estimator/ranges.py
 _RANGES = {
-    'station_spacing': (0.5, 20.0, 'distance between border support points [m]'),
-    'connector_spacing': (0.2, 20.0, 'distance between connector support points [m]'),
-    'connector_min_stations': (3, 1000, 'fewest support points of a connector'),
-    'connector_arc': (0, 1, '1: connectors start as arc-like cubic Bezier curves tangent to '
+    'station_spacing': ('[0.5, 20.0]', 'distance between border support points [m]'),
+    'connector_spacing': ('[0.2, 20.0]', 'distance between connector support points [m]'),
+    'connector_min_stations': ('[3, 1000]', 'fewest support points of a connector'),
+    'connector_arc': ('[0, 1]', '1: connectors start as arc-like cubic Bezier curves tangent to '
                           'their lanes, 0: straight (paper)'),
-    'connector_traffic': (0, 1, '1: connectors shaped by their traffic (lanes/spline.py, cubic '
+    'connector_traffic': ('[0, 1]', '1: connectors shaped by their traffic (lanes/spline.py, cubic '
                               'B-spline least squares), the arc/straight start only without it'),
-    'traffic_presmooth': (1, 51, 'moving-average length of the trajectory pieces [points]'),
-    'traffic_ctrl_spacing': (0.5, 50.0, 'chord per control point of a traffic connector [m]'),
-    'traffic_smooth': (0.0, 1e6, 'second-difference penalty on its control points'),
-    'traffic_min_points': (3, 10**6, 'fewest trajectory points to shape a connector'),
-    'traffic_select': (0.0, 1000.0, 'the fit replaces the start shape only when better by this '
+    'traffic_presmooth': ('[1, 51]', 'moving-average length of the trajectory pieces [points]'),
+    'traffic_ctrl_spacing': ('[0.5, 50.0]', 'chord per control point of a traffic connector [m]'),
+    'traffic_smooth': ('[0.0, 1e6]', 'second-difference penalty on its control points'),
+    'traffic_min_points': ('[3, 1e6]', 'fewest trajectory points to shape a connector'),
+    'traffic_select': ('[0.0, 1000.0]', 'the fit replaces the start shape only when better by this '
                        'per parameter (2: Akaike; 0: always)'),
-    'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
-    'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
-    'stop_step': (0.01, 5.0, 'grid step of the stop-distance search [m]'),
-    'stop_clip': (0.1, 50.0, 'distances are clipped here in the stop-distance fit [m]'),
-    'stop_sweeps': (1, 20, 'coordinate-descent sweeps over the arms in the stop fit'),
-    'refit_lanes': (0, 10, 'rounds of re-fitting arm directions and lane positions to the traffic '
+    'stop_fit': ('[0, 1]', '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
+    'stop_search': ('[0.0, 20.0]', 'search range around the geometric stop distance [m]'),
+    'stop_step': ('[0.01, 5.0]', 'grid step of the stop-distance search [m]'),
+    'stop_clip': ('[0.1, 50.0]', 'distances are clipped here in the stop-distance fit [m]'),
+    'stop_sweeps': ('[1, 20]', 'coordinate-descent sweeps over the arms in the stop fit'),
+    'refit_lanes': ('[0, 10]', 'rounds of re-fitting arm directions and lane positions to the traffic '
                     'and re-assigning the trajectory parts'),
-    'fit_margin': (0.0, 100.0, 'lane re-fit uses part points this far beyond the stop line [m]'),
-    'min_fit_points': (2, 10**6, 'fewest points to re-fit an arm direction'),
-    'max_refit_angle_deg': (0.0, 90.0, 'largest accepted change of an arm direction [deg]'),
-    'lane_prior_points': (0.0, 1e6, 'pseudo points of the topology lane position in the re-fit'),
-    'complete_partial': (0, 1, '1: give one-sided trajectories their other lane by path fit'),
-    'complete_min_points': (1, 10**6, 'fewest points inside the stop line for that'),
-    'complete_max_cost': (0.0, 100.0, 'largest mean clipped squared distance to the path [m^2]'),
-    'complete_min_ratio': (1.0, 100.0, 'runner-up path must cost this many times more'),
-    'arm_length_min': (5.0, 500.0, 'shortest entering/leaving lanelet [m]'),
-    'arm_length_max': (5.0, 500.0, 'longest entering/leaving lanelet [m]'),
-    'stop_margin': (0.0, 20.0, 'extra distance of the stop line beyond the corner of two arms [m]'),
-    'kerb_radius': (0.0, 50.0, 'radius of the rounded kerb between two arms [m]'),
-    'assign_inside': (0.0, 50.0, 'part points this far inside the stop line still count [m]'),
-    'min_part_length': (0.0, 200.0, 'shortest extent along its arm of a trajectory part [m]'),
-    'stop_min': (0.0, 100.0, 'smallest stop-line distance from the center [m]'),
-    'stop_max': (0.0, 200.0, 'largest stop-line distance from the center [m]'),
-    'min_part_points': (1, 1000, 'fewest points of a trajectory part that gets a lane'),
-    'assign_gate': (0.1, 50.0, 'largest distance of a part mean to its lane center line [m]'),
-    'min_connector_evidence': (1, 1000, 'trajectories needed to create a connector'),
-    'point_gate': (0.1, 50.0, 'trajectory points farther from their lane sequence are ignored [m]'),
-    'window_segments': (1, 2, 'center-line segments a point is scored against (nearest [+ next])'),
-    'sigma_perp': (0.01, 10.0, 'std of d_perp in the likelihood [m] (paper §III-C)'),
-    'outlier_weight': (0.0, 1.0, 'weight of a uniform outlier component per point'),
-    'sigma_delta': (1e-3, 10.0, 'std of the smoothness delta_l per lanelet [rad] (paper §III-C)'),
-    'tau': (0.0, 1000.0, 'exponent tau of the shared-border term s(I2)^tau'),
-    'width_min': (0.5, 10.0, 'narrowest lanelet [m]'),
-    'width_max': (0.5, 20.0, 'widest lanelet [m]'),
-    'merge_radius': (0.0, 5.0, 'border points closer than this are split/merge candidates [m]'),
-    'step_center': (1e-3, 5.0, 'std of a center-point move [m]'),
-    'step_border': (1e-3, 5.0, 'std of a border-point move [m]'),
-    'split_max': (0.0, 5.0, 'largest split distance Delta b [m] (paper: 0.6)'),
-    'p_center': (0.0, 1.0, 'probability of a center-point move'),
-    'p_border': (0.0, 1.0, 'probability of a border-point move'),
-    'p_split': (0.0, 1.0, 'probability of a split move'),
-    'p_merge': (0.0, 1.0, 'probability of a merge move'),
-    'temp_start': (1e-4, 1e4, 'annealing temperature at sample 0'),
-    'temp_end': (1e-4, 1e4, 'annealing temperature after anneal_samples'),
-    'anneal_samples': (1, 10**9, 'length of the geometric annealing schedule'),
-    'warm_tolerance': (0.0, 100.0, 'warm start only while the new initial course is this close [m]'),
-    'keep_best': (0, 1, '1: end each run in the best state seen (MAP), 0: in the final state'),
-    'refine': (0, 1, 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
-    'refine_init': (0, 1, 'penalised least-squares refinement of the initialisation'),
-    'refine_smooth': (0.0, 1e6, 'weight of the second-difference penalty of the refinement'),
-    'refine_smooth_connector': (0.0, 1e6, 'second-difference weight inside connectors'),
-    'refine_keep_shape': (0, 1, '1: penalise second differences relative to the initial shape'),
-    'refine_jerk': (0.0, 1e6, 'weight of the third-difference penalty of the refinement'),
-    'refine_width': (0.0, 1e6, 'weight pulling lane widths to their topology width'),
-    'refine_iters': (1, 50, 'Gauss-Newton iterations of the refinement'),
-    'refine_huber': (0.01, 100.0, 'Huber threshold of the refinement residuals [m]'),
+    'fit_margin': ('[0.0, 100.0]', 'lane re-fit uses part points this far beyond the stop line [m]'),
+    'min_fit_points': ('[2, 1e6]', 'fewest points to re-fit an arm direction'),
+    'max_refit_angle_deg': ('[0.0, 90.0]', 'largest accepted change of an arm direction [deg]'),
+    'lane_prior_points': ('[0.0, 1e6]', 'pseudo points of the topology lane position in the re-fit'),
+    'complete_partial': ('[0, 1]', '1: give one-sided trajectories their other lane by path fit'),
+    'complete_min_points': ('[1, 1e6]', 'fewest points inside the stop line for that'),
+    'complete_max_cost': ('[0.0, 100.0]', 'largest mean clipped squared distance to the path [m^2]'),
+    'complete_min_ratio': ('[1.0, 100.0]', 'runner-up path must cost this many times more'),
+    'arm_length_min': ('[5.0, 500.0]', 'shortest entering/leaving lanelet [m]'),
+    'arm_length_max': ('[5.0, 500.0]', 'longest entering/leaving lanelet [m]'),
+    'stop_margin': ('[0.0, 20.0]', 'extra distance of the stop line beyond the corner of two arms [m]'),
+    'kerb_radius': ('[0.0, 50.0]', 'radius of the rounded kerb between two arms [m]'),
+    'assign_inside': ('[0.0, 50.0]', 'part points this far inside the stop line still count [m]'),
+    'min_part_length': ('[0.0, 200.0]', 'shortest extent along its arm of a trajectory part [m]'),
+    'stop_min': ('[0.0, 100.0]', 'smallest stop-line distance from the center [m]'),
+    'stop_max': ('[0.0, 200.0]', 'largest stop-line distance from the center [m]'),
+    'min_part_points': ('[1, 1000]', 'fewest points of a trajectory part that gets a lane'),
+    'assign_gate': ('[0.1, 50.0]', 'largest distance of a part mean to its lane center line [m]'),
+    'min_connector_evidence': ('[1, 1000]', 'trajectories needed to create a connector'),
+    'point_gate': ('[0.1, 50.0]', 'trajectory points farther from their lane sequence are ignored [m]'),
+    'window_segments': ('[1, 2]', 'center-line segments a point is scored against (nearest [+ next])'),
+    'sigma_perp': ('[0.01, 10.0]', 'std of d_perp in the likelihood [m] (paper §III-C)'),
+    'outlier_weight': ('[0.0, 1.0]', 'weight of a uniform outlier component per point'),
+    'sigma_delta': ('[1e-3, 10.0]', 'std of the smoothness delta_l per lanelet [rad] (paper §III-C)'),
+    'tau': ('[0.0, 1000.0]', 'exponent tau of the shared-border term s(I2)^tau'),
+    'width_min': ('[0.5, 10.0]', 'narrowest lanelet [m]'),
+    'width_max': ('[0.5, 20.0]', 'widest lanelet [m]'),
+    'merge_radius': ('[0.0, 5.0]', 'border points closer than this are split/merge candidates [m]'),
+    'step_center': ('[1e-3, 5.0]', 'std of a center-point move [m]'),
+    'step_border': ('[1e-3, 5.0]', 'std of a border-point move [m]'),
+    'split_max': ('[0.0, 5.0]', 'largest split distance Delta b [m] (paper: 0.6)'),
+    'p_center': ('[0.0, 1.0]', 'probability of a center-point move'),
+    'p_border': ('[0.0, 1.0]', 'probability of a border-point move'),
+    'p_split': ('[0.0, 1.0]', 'probability of a split move'),
+    'p_merge': ('[0.0, 1.0]', 'probability of a merge move'),
+    'temp_start': ('[1e-4, 1e4]', 'annealing temperature at sample 0'),
+    'temp_end': ('[1e-4, 1e4]', 'annealing temperature after anneal_samples'),
+    'anneal_samples': ('[1, 1e9]', 'length of the geometric annealing schedule'),
+    'warm_tolerance': ('[0.0, 100.0]', 'warm start only while the new initial course is this close [m]'),
+    'keep_best': ('[0, 1]', '1: end each run in the best state seen (MAP), 0: in the final state'),
+    'refine': ('[0, 1]', 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
+    'refine_init': ('[0, 1]', 'penalised least-squares refinement of the initialisation'),
+    'refine_smooth': ('[0.0, 1e6]', 'weight of the second-difference penalty of the refinement'),
+    'refine_smooth_connector': ('[0.0, 1e6]', 'second-difference weight inside connectors'),
+    'refine_keep_shape': ('[0, 1]', '1: penalise second differences relative to the initial shape'),
+    'refine_jerk': ('[0.0, 1e6]', 'weight of the third-difference penalty of the refinement'),
+    'refine_width': ('[0.0, 1e6]', 'weight pulling lane widths to their topology width'),
+    'refine_iters': ('[1, 50]', 'Gauss-Newton iterations of the refinement'),
+    'refine_huber': ('[0.01, 100.0]', 'Huber threshold of the refinement residuals [m]'),
 }
 
 
@@ -152,11 +154,7 @@ class LaneConfig:
 
     def validate(self) -> 'LaneConfig':
         """Raise ``ValueError`` naming the first parameter outside its allowed range."""
-        for f in fields(self):
-            lo, hi, what = _RANGES[f.name]
-            v = getattr(self, f.name)
-            if not (lo <= v <= hi):
-                raise ValueError(f'LaneConfig.{f.name}={v!r} outside [{lo}, {hi}] ({what})')
+        check_table(self, {f.name: _RANGES[f.name] for f in fields(self)})
         if self.arm_length_min > self.arm_length_max:
             raise ValueError('LaneConfig.arm_length_min must be <= arm_length_max')
         if self.stop_min > self.stop_max:

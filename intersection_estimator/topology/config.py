@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, make_dataclass
 import math
-import re
 
 import numpy as np
 
+from ..ranges import check_range
 from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
 from .refit import log_floor_table
 from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_D2_CUT,
@@ -126,24 +126,9 @@ RANGES = {
     'converge_tol': ('[0, inf)', '... of more than this [nats]'),
 }
 
-_INTERVAL = re.compile(r'^([\[(])\s*([^,]+?)\s*,\s*([^\]\)]+?)\s*([\])])$')
-
-
-def _bound(cfg, text: str) -> float:
-    return float(getattr(cfg, text)) if text.isidentifier() and text != 'inf' else float(text)
-
-
 def _check_range(cfg, name: str) -> None:
     """Raise ValueError unless ``cfg.<name>`` lies in its :data:`RANGES` interval."""
-    interval, what = RANGES[name]
-    if interval is None:
-        return
-    opn, lo, hi, cls = _INTERVAL.match(interval).groups()
-    v = getattr(cfg, name)
-    lo, hi = _bound(cfg, lo), _bound(cfg, hi)
-    ok = (lo < v if opn == '(' else lo <= v) and (v < hi if cls == ')' else v <= hi)
-    if not ok:
-        raise ValueError(f'{type(cfg).__name__}.{name}={v!r} outside {interval} ({what})')
+    check_range(cfg, name, *RANGES[name])
 
 
 def _need(cfg, name: str, ok: bool, rule: str) -> None:
