@@ -26,9 +26,24 @@ ENTERING = 1
 LEAVING = -1
 
 __all__ = [
+    'topology_key',
     'ENTERING', 'LEAVING', 'Arm', 'Intersection', 'Lanelet',
     'wrap_angle', 'lane_offset',
 ]
+
+
+def topology_key(t: 'Intersection', center_m: float, angle_deg: float, gap_m: float | None = None,
+                 width_m: float | None = None) -> tuple:
+    """A hashable summary of ``t`` at the given resolutions (center [m], arm angles [deg],
+    optionally gaps and lane widths [m]; lane counts and the traffic side exactly): two
+    topologies with equal keys are the same to whoever keys on them (the lane estimator's
+    warm start; the pipeline's "re-initialise the lane course")."""
+    def q(v, step):
+        return round(float(v) / step)
+    arms = tuple((q(math.degrees(a.angle), angle_deg),)
+                 + ((q(a.gap, gap_m),) if gap_m else ()) + (a.lanes_in, a.lanes_out)
+                 + ((q(a.lane_width, width_m),) if width_m else ()) for a in t.arms)
+    return (q(t.center[0], center_m), q(t.center[1], center_m), t.traffic_side, arms)
 
 
 def wrap_angle(a):

@@ -16,7 +16,7 @@ import numpy as np
 
 from .convergence import ConvergenceConfig, ConvergenceTracker
 from .lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
-from .model import Intersection, Lanelet
+from .model import Intersection, Lanelet, topology_key
 from .observability import Observability, assess
 from .observations import Detections
 from .ranges import check_table
@@ -474,9 +474,9 @@ def _prefers(a: TopologyEstimator, b: TopologyEstimator) -> bool:
 
 
 def _topology_key(best: Intersection) -> tuple:
-    """What the lane course depends on: re-initialise lanes when it changes (§III)."""
-    return ('ok', round(float(best.center[0]), 0), round(float(best.center[1]), 0),
-            tuple((round(float(np.degrees(a.angle)) / 3), a.lanes_in, a.lanes_out) for a in best.arms))
+    """What the lane course depends on (1 m, 3 deg, lane counts): re-initialise lanes when
+    it changes (§III)."""
+    return ('ok',) + topology_key(best, 1.0, 3.0)
 
 
 def warmup() -> float:

@@ -10,16 +10,15 @@ last line it printed on stderr (its warning or error; the last stdout line witho
     .venv/bin/python scripts/attack_runs.py --only gap_1h no_gap
     .venv/bin/python scripts/attack_runs.py --keep /tmp/attack   # keep the bags and outputs
 
-The live-burst row (a running node flooded with clouds) is helper C's: a module
-``scripts/attack_live_burst.py`` with ``run(root: Path) -> Row`` is picked up when present.
-Exit status 1 when a row crashed (a traceback, a signal) or timed out.
+The live burst (a running node flooded with clouds: peak RSS, tick recovery) is
+``scripts/burst_node.py``. Exit status 1 when a row crashed (a traceback, a signal) or
+timed out.
 """
 
 from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
-import importlib.util
 import os
 from pathlib import Path
 import shutil
@@ -168,17 +167,6 @@ def _chatter(path: Path) -> Path:
     return path
 
 
-def live_burst(root: Path) -> Row | None:
-    """Helper C's row, when scripts/attack_live_burst.py exists (``run(root) -> Row``)."""
-    path = HERE / 'attack_live_burst.py'
-    if not path.exists():
-        return None
-    spec = importlib.util.spec_from_file_location('attack_live_burst', path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.run(root)
-
-
 def table(results: list[Row]) -> str:
     head = f'{"run":24s} {"exit":>7s} {"wall s":>8s} {"peak MB":>8s}  last line printed'
     body = [f'{r.name:24s} {str(r.code):>7s} {r.wall_s:8.1f} {r.rss_mb:8.0f}  {r.last[:150]}' for r in results]
@@ -194,9 +182,9 @@ def main(argv=None) -> int:
     root.mkdir(parents=True, exist_ok=True)
     try:
         todo = rows(root)
-        unknown = sorted(set(args.only or ()) - set(todo) - {'live_burst'})
+        unknown = sorted(set(args.only or ()) - set(todo))
         if unknown:
-            print(f'attack_runs: unknown run(s) {", ".join(unknown)}; have {", ".join(todo)}, live_burst',
+            print(f'attack_runs: unknown run(s) {", ".join(unknown)}; have {", ".join(todo)}',
                   file=sys.stderr)
             return 2
         results = []
@@ -204,11 +192,8 @@ def main(argv=None) -> int:
             if args.only is None or name in args.only:
                 results.append(fn())
                 print(table(results[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
-        if args.only is None or 'live_burst' in args.only:
-            row = live_burst(root)
-            results.append(row or Row('live_burst', '-', 0.0, 0.0, "helper C's row: scripts/attack_live_burst.py"))
         print(table(results))
-        return 1 if any(r.crashed() for r in results if r.code != '-') else 0
+        return 1 if any(r.crashed() for r in results) else 0
     finally:
         if not args.keep:
             shutil.rmtree(root, ignore_errors=True)

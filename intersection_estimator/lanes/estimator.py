@@ -14,7 +14,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..model import ENTERING, LEAVING, Intersection, Lanelet
+from ..model import ENTERING, LEAVING, Intersection, Lanelet, topology_key
 from ..observations import Detections
 from .config import LaneConfig
 from .init import (arm_frames, assign_parts, connector_id, fit_frames, lane_id, lane_specs,
@@ -39,9 +39,8 @@ def lanelets_from_topology(topology: Intersection, length: float = 60.0,
 
 
 def _topology_key(t: Intersection):
-    return (round(float(t.center[0]) * 4), round(float(t.center[1]) * 4), t.traffic_side,
-            tuple((round(np.degrees(a.angle) * 2), round(a.gap * 4), a.lanes_in, a.lanes_out,
-                   round(a.lane_width * 4)) for a in t.arms))
+    """The topology at the warm start's resolution (0.25 m, 0.5 deg)."""
+    return topology_key(t, 0.25, 0.5, gap_m=0.25, width_m=0.25)
 
 
 def _respace(graph: LaneGraph, lane: int) -> None:
