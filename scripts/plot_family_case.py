@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     opts = BenchOptions(n=1, mode=args.mode, family=args.family, seed=0)
     sc, gt = make_case(opts, args.seed)
-    est, _ = _run_estimator(estimate, sc, opts)
+    est, _, _ = _run_estimator(estimate, sc, opts)
     m = evaluate(est, gt)
     inter, lanes, _ = parse_estimate(est)
     title = (f"{args.family} {args.seed} ({args.mode}): arms {m['n_arms_est']}/{m['n_arms_true']}, "

@@ -22,6 +22,7 @@ import math
 import os
 from pathlib import Path
 import subprocess
+import sys
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -65,10 +66,18 @@ def sumo_binary(name: str) -> str:
 
 
 def realdata_dir() -> Path:
-    """``$IE_REALDATA`` if set, else ``../shared/realdata`` beside the checkout (CI lays
-    shared/ beside the clone)."""
+    """``$IE_REALDATA`` if set, else the first existing ``shared/realdata`` beside the checkout
+    (CI lays shared/ beside the clone): beside the source tree, beside the checkout whose
+    ``.venv`` runs this (an installed copy), beside the working directory; the source tree's
+    candidate when none exists (the caller's error then names it)."""
     env = os.environ.get('IE_REALDATA')
-    return Path(env) if env else Path(__file__).resolve().parents[2].parent / 'shared' / 'realdata'
+    if env:
+        return Path(env)
+    tail = Path('shared') / 'realdata'
+    cands = [Path(__file__).resolve().parents[2].parent / tail,
+             Path(sys.prefix).resolve().parent.parent / tail,
+             Path.cwd().resolve().parent / tail, Path.cwd().resolve() / tail]
+    return next((c for c in cands if c.is_dir()), cands[0])
 
 
 def _angles(rng, n, min_deg):

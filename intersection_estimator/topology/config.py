@@ -92,6 +92,12 @@ RANGES = {
     'min_track_speed': ('[0, 50]', 'tracks never faster than this are static (false) [m/s]'),
     'trim_turn_deg': ('[0, 90]', 'keep the straight run of a trajectory part (0: whole part, '
                       'paper) [deg]'),
+    'max_center_dist': ('(min_center_dist, inf]', 'radar / heading observations farther from the '
+                        'center are dropped (arms are straight rays, §II-B; real approaches curve) [m]'),
+    'trim_longest': (None, 'trajectory parts: keep their longest straight run, not the first from '
+                     'the far end (beyond the paper; preprocess.straight_run)'),
+    'track_radius': ('(min_center_dist, inf]', 'trajectory rows farther from the center do not enter '
+                     'the trajectory parts (their mean point and direction, §II-A) [m]'),
     'min_center_dist': ('[0, 100]', 'observations closer to the center are dropped (vehicles '
                         'turn inside the box; lanes are straight rays, §II-B) [m]'),
     'arm_reach': ('[1, 100]', 'rows farther from every arm axis are voxelised along rays '
@@ -201,6 +207,9 @@ class TopologyConfig:
     min_track_speed: float = 3.0
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0
+    max_center_dist: float = math.inf
+    track_radius: float = math.inf
+    trim_longest: bool = False
     arm_reach: float = 18.0
     recenter_threshold: float = 2.0
     recenter_window: int = 2500
@@ -291,7 +300,7 @@ class TopologyConfig:
 
 
 _MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width')
-_FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction')
+_FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction', 'trim_longest')
 
 
 def _check_flags(cfg) -> None:
@@ -306,7 +315,8 @@ PREPROCESS_FIELDS = (
     'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
-    'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'arm_reach')
+    'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
+    'track_radius', 'trim_longest', 'arm_reach')
 
 
 def _preprocess_validate(self) -> 'PreprocessConfig':

@@ -68,13 +68,18 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
         if len(starts) == 0:
             return ObservationSet.empty()
     c = np.asarray(center, float)
+    if math.isfinite(cfg.track_radius):   # parts made of the rows near the box only
+        starts, ends, tid, xy, hd = _rows_within(c, cfg.track_radius, starts, ends, tid, xy, hd)
+        if len(starts) == 0:
+            return ObservationSet.empty()
     if not np.isfinite(hd).all():      # rows without heading: direction from positions
         for a, b in zip(starts, ends):
             h = hd[a:b]
             if not np.isfinite(h).all():
                 hd[a:b] = _path_heading(xy[a:b])
     o = split_tracks(xy[:, 0].copy(), xy[:, 1].copy(), hd, starts, ends, float(c[0]), float(c[1]),
-                     cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5)
+                     cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5,
+                     bool(cfg.trim_longest))
     if len(o) == 0:
         return ObservationSet.empty()
     hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
@@ -82,7 +87,19 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
                          np.full(len(o), cfg.sigma_track),
                          np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
-    return _drop_near_center(obs, c, cfg)
+    return _drop_near_center(obs, c, cfg, far=False)
+
+
+def _rows_within(c, radius: float, starts, ends, tid, xy, hd):
+    """The rows of the kept tracks within ``radius`` of ``c`` (track order kept), and the
+    new track bounds."""
+    keep = np.zeros(len(tid), bool)
+    for a, b in zip(starts, ends):
+        keep[a:b] = True
+    keep &= np.hypot(xy[:, 0] - c[0], xy[:, 1] - c[1]) <= radius
+    tid, xy, hd = tid[keep], xy[keep], hd[keep]
+    starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]]) if len(tid) else np.zeros(0, np.int64)
+    return starts, np.r_[starts[1:], len(tid)].astype(np.int64), tid, xy, hd
 
 
 def _path_heading(p: np.ndarray) -> np.ndarray:
@@ -153,7 +170,8 @@ def radar_observations(dets: Detections, center, cfg: PreprocessConfig,
             float(cfg.min_radial_cos), float(cfg.min_doppler), bool(cfg.keep_unknown_direction),
             RAYS, float(cfg.voxel_length), float(cfg.voxel_width), bool(cfg.straight_run),
             int(cfg.voxel_merge), float(cfg.passage_gap), float(cfg.min_center_dist))
-        return _radar_set(vx, vy, dcls, cnt, cfg)
+        obs = _radar_set(vx, vy, dcls, cnt, cfg)
+        return _drop_near_center(obs, c, cfg) if math.isfinite(cfg.max_center_dist) else obs
     _, _, _, group, cls = radar_frame(
         rows.x, rows.y, rows.doppler, rows.sensor_x, rows.sensor_y, float(c[0]), float(c[1]),
         np.zeros(0), float(cfg.arm_reach), float(cfg.min_radial_cos), float(cfg.min_doppler),
@@ -238,10 +256,15 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
     return _drop_near_center(obs, c, cfg)
 
 
-def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig) -> ObservationSet:
-    if cfg.min_center_dist <= 0 or len(obs) == 0:
+def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig, far: bool = True) -> ObservationSet:
+    """Observations in the ring ``min_center_dist <= r <= max_center_dist`` around ``c``
+    (``far`` False: no outer bound)."""
+    far = far and math.isfinite(cfg.max_center_dist)
+    if (cfg.min_center_dist <= 0 and not far) or len(obs) == 0:
         return obs
-    return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.min_center_dist)
+    r = np.hypot(obs.x - c[0], obs.y - c[1])
+    return obs.subset((r >= cfg.min_center_dist) & (r <= cfg.max_center_dist) if far else
+                      r >= cfg.min_center_dist)
 
 
 def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
@@ -255,14 +278,65 @@ def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
 
 
 @njit(cache=True)
-def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
+def _run_from(h, first, step, q0, n, tol, win):
+    """Length of the straight run of rows ``q0..n-1`` (row ``q`` is ``h[first + step * q]``):
+    up to the first row where the moving average (``win`` rows) of the heading deviation
+    from the run's start direction (mean of its first rows) exceeds ``tol``; >= 3 rows."""
+    m = n - q0
+    k = max(3, m // 5)
+    sx = 0.0
+    sy = 0.0
+    for q in range(q0, min(q0 + k, n)):
+        sx += math.cos(h[first + step * q])
+        sy += math.sin(h[first + step * q])
+    ref = math.atan2(sy, sx)
+    dev = np.empty(m)
+    for q in range(m):
+        dev[q] = abs(wrap(h[first + step * (q0 + q)] - ref))
+    half = win // 2
+    run = m
+    for q in range(m):
+        acc = 0.0
+        for r in range(q - half, q - half + win):
+            if 0 <= r < m:
+                acc += dev[r]
+        if acc / win > tol:
+            run = q
+            break
+    return max(run, min(m, 3))
+
+
+@njit(cache=True)
+def straight_run(h, first, step, n, tol, win, longest):
+    """(start, length) of the rows of a trajectory part kept for its mean (§II-A, the turn
+    trimmed): the straight run from the far end (paper-like), or with ``longest`` (beyond
+    the paper) the longest of the consecutive straight runs the part splits into -- on a
+    curved approach within the radius the piece next to the box, not the bend; the first
+    run wins ties, so a straight approach keeps exactly the far-end run."""
+    run = _run_from(h, first, step, 0, n, tol, win)
+    if not longest:
+        return 0, run
+    best_start, best = 0, run
+    q0 = run
+    while q0 < n:
+        r = _run_from(h, first, step, q0, n, tol, win)
+        if r > best:
+            best_start, best = q0, r
+        q0 += r
+    return best_start, best
+
+
+@njit(cache=True)
+def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, longest):
     """Paper §II-A for tracked objects: split each trajectory at its point closest to the
     center ``(cx, cy)`` and reduce each part to its mean point and mean direction.
 
     Rows are sorted by (track, time); ``h`` is the heading per row. With ``tol > 0`` a part
     is first cut to its straight run from the far end (moving average of ``win`` heading
     deviations from the far-end direction below ``tol``): the turn inside the intersection
-    box would bias the mean point and direction. Returns (mx, my, vx, vy) per kept part.
+    box would bias the mean point and direction; with ``longest`` the longest straight run
+    of the part is kept instead of the first (:func:`straight_run`). Returns (mx, my, vx,
+    vy) per kept part.
 
     Length (over 80 lines): one pass per trajectory (closest point, split, straight-run
     trim, means); helpers would need the same dozen loop-carried variables.
@@ -300,34 +374,14 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win):
             # far end first: entering part (0) starts far, leaving part (1) ends far
             step = 1 if part == 0 else -1
             first = lo if part == 0 else hi - 1
-            keep = n
+            start, keep = 0, n
             if tol > 0.0:
-                k = max(3, n // 5)
-                sx = 0.0
-                sy = 0.0
-                for q in range(k):
-                    sx += math.cos(h[first + step * q])
-                    sy += math.sin(h[first + step * q])
-                ref = math.atan2(sy, sx)
-                dev = np.empty(n)
-                for q in range(n):
-                    dev[q] = abs(wrap(h[first + step * q] - ref))
-                half = win // 2
-                keep = n
-                for q in range(n):
-                    acc = 0.0
-                    for r in range(q - half, q - half + win):
-                        if 0 <= r < n:
-                            acc += dev[r]
-                    if acc / win > tol:
-                        keep = q
-                        break
-                keep = max(keep, min(n, 3))
+                start, keep = straight_run(h, first, step, n, tol, win, longest)
             mx = 0.0
             my = 0.0
             vx = 0.0
             vy = 0.0
-            for q in range(keep):
+            for q in range(start, start + keep):
                 i = first + step * q
                 mx += x[i]
                 my += y[i]

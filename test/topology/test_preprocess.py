@@ -140,3 +140,40 @@ def test_an_arm_the_chain_has_not_found_keeps_its_radar_and_heading_data():
 
 
 
+
+
+def _curved_approach():
+    """A vehicle driving toward the center (0, 0) along +x's lane at y = -1.75 for its last
+    60 m, on a road that bends away by 30 deg beyond 60 m (a curved approach)."""
+    near = np.stack([np.arange(60.0, 20.0, -1.0), np.full(40, -1.75)], axis=1)
+    a = math.radians(30.0)
+    far = near[0] + np.outer(np.arange(60.0, 0.0, -1.0), [math.cos(a), math.sin(a)])
+    xy = np.concatenate([far, near])
+    d = np.gradient(xy, axis=0)
+    return Detections.make(xy, t=np.arange(len(xy)) * 0.1, heading=np.arctan2(d[:, 1], d[:, 0]),
+                           track_id=3)
+
+
+def test_track_radius_keeps_the_part_next_to_the_box():
+    """Beyond the paper: the part's mean point and direction from the rows within
+    track_radius describe the straight piece of a curved approach; without it the bend
+    pulls them off the lane."""
+    dets = _curved_approach()
+    whole = tracked_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=20.0))
+    near = tracked_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=20.0, track_radius=65.0,
+                                                               trim_longest=True))
+    assert len(whole) == len(near) == 1
+    assert abs(near.y[0] + 1.75) < 0.05 and abs(near.hy[0]) < 0.02
+    assert abs(whole.y[0] + 1.75) > 1.0 or abs(whole.hy[0]) > 0.1
+    # no row within the radius: no part
+    assert len(tracked_observations(dets, (500.0, 0.0), replace(CFG, track_radius=30.0))) == 0
+
+
+def test_max_center_dist_bounds_the_ring_of_voxel_observations():
+    I = easy_intersection(center=(0.0, 0.0))
+    dets = scene(I, 'heading', seed=4)
+    ring = heading_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=10.0, max_center_dist=40.0))
+    r = np.hypot(ring.x, ring.y)
+    assert len(ring) and r.min() >= 10.0 and r.max() <= 40.0
+    free = heading_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=10.0))
+    assert np.hypot(free.x, free.y).max() > 40.0
