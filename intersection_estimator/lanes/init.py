@@ -29,6 +29,7 @@ from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
+from .follow import follow_borders
 from .spline import traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
@@ -310,10 +311,35 @@ def _border_positions(lat: list[float], width: float) -> np.ndarray:
     return b
 
 
+def _lane_points(trajs) -> dict:
+    """(arm, direction, k) -> points (m, 2) of the trajectory parts assigned to that lane."""
+    out: dict = {}
+    for tr in trajs:
+        for d, lane in ((ENTERING, tr.lane_in), (LEAVING, tr.lane_out)):
+            if lane is not None:
+                out.setdefault((lane[0], d, lane[1]), []).append(_part_points(tr, d))
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def _arm_borders(f, d, b, stop, ext, n_st, lane_pts, ai, n_lanes, cfg):
+    """(K + 1, n_st, 2) border polylines from the stop line outwards: straight (paper
+    §III-A) or, with ``follow_lanes``, shaped by the lanes' traffic (``lanes/follow.py``)."""
+    if cfg.follow_lanes and lane_pts:
+        pts = [lane_pts.get((ai, d, k), np.zeros((0, 2))) for k in range(n_lanes)]
+        if any(len(p) for p in pts):
+            shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
+                                    stop + ext, n_st, pts, cfg)
+            if shaped is not None:
+                return shaped
+    s = np.linspace(stop, stop + ext, n_st)
+    return np.stack([f.point(s, bj) for bj in b])
+
+
 def _straight_lanes(topo, frames, stops, trajs, cfg, length):
     """Entering/leaving specs and the interior neighbour pairs of each arm."""
     specs, pairs, index = [], [], {}
     far = _farthest(trajs, frames) if length is None else {}
+    lane_pts = _lane_points(trajs) if cfg.follow_lanes else {}
     for ai, a in enumerate(topo.arms):
         f = frames[ai]
         for d in (ENTERING, LEAVING):
@@ -323,9 +349,9 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
             b = _border_positions([f.lat[(d, k)] for k in range(n_lanes)], f.width)
             ext = _extent(far, ai, d, stops[ai], cfg, length)
             n_st = max(2, int(round(ext / cfg.station_spacing)) + 1)
-            s = np.linspace(stops[ai], stops[ai] + ext, n_st)
+            geo = _arm_borders(f, d, b, stops[ai], ext, n_st, lane_pts, ai, n_lanes, cfg)
             if d == ENTERING:
-                s = s[::-1]
+                geo = geo[:, ::-1]
             end = 0 if d == LEAVING else n_st - 1
             first = len(specs)
             for k in range(n_lanes):
@@ -337,7 +363,7 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
                 lk[end], rk[end] = ('end', ai, d, li), ('end', ai, d, ri)
                 specs.append(LaneletSpec(
                     id=lane_id(ai, d, k), kind='entering' if d == ENTERING else 'leaving',
-                    arm=ai, left=f.point(s, b[li]), right=f.point(s, b[ri]), left_keys=lk,
+                    arm=ai, left=geo[li].copy(), right=geo[ri].copy(), left_keys=lk,
                     right_keys=rk, lane_index=k))
                 index[(ai, d, k)] = len(specs) - 1
             # neighbour k shares its outer border with k+1's inner border (interior stations)

@@ -32,7 +32,26 @@ import numpy as np
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-__all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector']
+__all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector',
+           'second_differences', 'aic_prefers']
+
+
+def second_differences(n: int) -> np.ndarray:
+    """(n - 2, n) matrix of second differences of n control points (the smoothness rows
+    of the connector fit here and of the approach-lane fit in ``lanes/follow.py``)."""
+    D = np.zeros((max(n - 2, 0), n))
+    for i in range(n - 2):
+        D[i, i:i + 3] = (1.0, -2.0, 1.0)
+    return D
+
+
+def aic_prefers(m: int, rss_start: float, rss_fit: float, n_params: float,
+                penalty: float) -> bool:
+    """The selection rule of :func:`prefer_fit`: ``m log(RSS_start / RSS_fit) > penalty *
+    n_params`` (``penalty = 2``: Akaike's criterion for Gaussian residuals; 0: always)."""
+    if penalty <= 0:
+        return True
+    return m * math.log(max(rss_start, 1e-12) / max(rss_fit, 1e-12)) > penalty * n_params
 
 
 def connector_pieces(trajs_xy: list[np.ndarray], c0: np.ndarray, c1: np.ndarray,
@@ -111,9 +130,7 @@ def _solve(Q, u, knots, c0, t0, c1, t1, smooth):
     Md = np.einsum('mj,jdz->mdz', B, A).reshape(-1, nz)
     rd = (Q - B @ b).reshape(-1)
     # smoothness rows: second differences of the control points
-    D = np.zeros((n - 2, n))
-    for i in range(n - 2):
-        D[i, i:i + 3] = (1.0, -2.0, 1.0)
+    D = second_differences(n)
     Ms = math.sqrt(smooth * len(Q) / max(n, 1)) * np.einsum('kj,jdz->kdz', D, A).reshape(-1, nz)
     rs = -math.sqrt(smooth * len(Q) / max(n, 1)) * (D @ b).reshape(-1)
     z, *_ = np.linalg.lstsq(np.vstack([Md, Ms]), np.concatenate([rd, rs]), rcond=None)
@@ -153,8 +170,7 @@ def prefer_fit(pieces, fitted: np.ndarray, start: np.ndarray, n_params: int,
     if penalty <= 0:
         return True
     Q = np.concatenate(pieces)
-    r_fit, r_start = _rss(Q, fitted, clip), _rss(Q, start, clip)
-    return len(Q) * math.log(max(r_start, 1e-12) / max(r_fit, 1e-12)) > penalty * n_params
+    return aic_prefers(len(Q), _rss(Q, start, clip), _rss(Q, fitted, clip), n_params, penalty)
 
 
 def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):
