@@ -29,6 +29,7 @@ _RANGES = {
                       'degree of freedom (2: Akaike; 0: always)'),
     'follow_min_points': (4, 10**6, 'fewest trajectory points to shape an arm direction / lane'),
     'follow_gate': (0.1, 20.0, 'residuals beyond this after a first fit are dropped [m]'),
+    'follow_iters': (0, 10, 'corrections of that shift measured along the shifted axis\'s normal'),
     'follow_per_lane': (0, 1, '1: each lane with traffic also gets its own deviation'),
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
@@ -105,10 +106,11 @@ class LaneConfig:
     traffic_select: float = 2.0
     follow_lanes: int = 0
     follow_ctrl_spacing: float = 10.0
-    follow_smooth: float = 1.0
+    follow_smooth: float = 0.05
     follow_select: float = 2.0
     follow_min_points: int = 20
     follow_gate: float = 2.0
+    follow_iters: int = 2
     follow_per_lane: int = 0
     stop_fit: int = 1
     stop_search: float = 2.0

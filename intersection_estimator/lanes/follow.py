@@ -63,6 +63,11 @@ class OffsetFit:
     def __call__(self, s) -> np.ndarray:
         return self.spline(np.clip(s, self.lo, self.hi)) + self._extrapolate(s)
 
+    def plus(self, other: 'OffsetFit') -> 'OffsetFit':
+        """``g + other`` (same knots): a correction fitted in the frame of ``g``."""
+        return OffsetFit(BSpline(self.spline.t, self.spline.c + other.spline.c, 3),
+                         self.edf, self.lo, self.hi)
+
     def slope(self, s) -> np.ndarray:
         """dg/ds (dimensionless); constant beyond the fitted range."""
         return self.spline.derivative()(np.clip(s, self.lo, self.hi))
@@ -96,11 +101,9 @@ def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing:
     return OffsetFit(BSpline(knots, coef, 3), edf, lo, hi)
 
 
-def select_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, cfg) -> OffsetFit | None:
-    """:func:`fit_offset` with one gated re-fit (``follow_gate`` [m]), kept only when it
-    beats ``g = 0`` (the straight lane) by ``follow_select`` per effective degree of
-    freedom (module docstring, step 3); None otherwise or for fewer than
-    ``follow_min_points`` points."""
+def _gated_fit(s, r, lo, hi, cfg):
+    """:func:`fit_offset` with one gated re-fit (``follow_gate`` [m]): (fit, kept mask) or
+    None for fewer than ``follow_min_points`` points."""
     if len(s) < cfg.follow_min_points:
         return None
     fit = fit_offset(s, r, lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth)
@@ -109,14 +112,52 @@ def select_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, cfg) -> Of
     keep = np.abs(r - fit(s)) <= cfg.follow_gate
     if keep.sum() < cfg.follow_min_points:
         return None
-    s, r = s[keep], r[keep]
-    fit = fit_offset(s, r, lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth)
-    if fit is None:
+    fit = fit_offset(s[keep], r[keep], lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth)
+    return None if fit is None else (fit, keep)
+
+
+def _selected(r0: np.ndarray, r1: np.ndarray, edf: float, cfg) -> bool:
+    """Residuals ``r1`` [m] of the fit beat ``r0`` of the straight lane by ``follow_select``
+    per effective degree of freedom (clipped at ``follow_gate``; ``spline.aic_prefers``)."""
+    c = cfg.follow_gate
+    rss0 = float(np.sum(np.minimum(np.abs(r0), c) ** 2))
+    rss1 = float(np.sum(np.minimum(np.abs(r1), c) ** 2))
+    return aic_prefers(len(r0), rss0, rss1, edf, cfg.follow_select)
+
+
+def select_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, cfg) -> OffsetFit | None:
+    """Gated :func:`fit_offset` of residuals ``r`` [m] over ``s`` [m], kept only when it
+    beats ``g = 0`` (module docstring, step 3); None otherwise or for too few points."""
+    got = _gated_fit(s, r, lo, hi, cfg)
+    if got is None:
         return None
-    clip = cfg.follow_gate
-    rss0 = float(np.sum(np.minimum(np.abs(r), clip) ** 2))
-    rss1 = float(np.sum(np.minimum(np.abs(r - fit(s)), clip) ** 2))
-    return fit if aic_prefers(len(s), rss0, rss1, fit.edf, cfg.follow_select) else None
+    fit, keep = got
+    return fit if _selected(r[keep], r[keep] - fit(s[keep]), fit.edf, cfg) else None
+
+
+def _common_shift(frame, lats, per_lane, lo, hi, cfg) -> OffsetFit | None:
+    """The shift ``g`` of all lanes of a direction (module docstring, steps 1-3): fitted
+    to the lateral residuals in the straight frame, then ``follow_iters`` times
+    corrected by a fit to the residuals measured along the normal of the shifted axis
+    (a lane ``lat`` beside a bent axis is not ``lat`` beside it in the straight frame)."""
+    g, keep, r0 = None, None, None
+    for it in range(1 + cfg.follow_iters):
+        s_all, r_all = [], []
+        for k, P in enumerate(per_lane):
+            sk, ok = _signed_offsets(P, frame, g, lo, hi)
+            s_all.append(sk)
+            r_all.append(ok - lats[k])
+        s_all, r_all = np.concatenate(s_all), np.concatenate(r_all)
+        if it == 0:
+            r0 = r_all
+        got = _gated_fit(s_all, r_all, lo, hi, cfg)
+        if got is None:
+            return None
+        delta, keep = got
+        g = delta if g is None else g.plus(delta)
+    res = _signed_offsets(np.concatenate(per_lane), frame, g, lo, hi)[1] - \
+        np.concatenate([np.full(len(P), lats[k]) for k, P in enumerate(per_lane)])
+    return g if _selected(r0[keep], res[keep], g.edf, cfg) else None
 
 
 def _reference(frame, g: OffsetFit | None, lo: float, hi: float, n_st: int):
@@ -137,7 +178,11 @@ def _reference(frame, g: OffsetFit | None, lo: float, hi: float, n_st: int):
 
 def _signed_offsets(P: np.ndarray, frame, g: OffsetFit | None, lo: float, hi: float):
     """(axis distance of the foot point, signed offset along ``N``) of points ``P`` from
-    the reference curve (dense, 0.25 m, extended 20 m beyond both ends)."""
+    the reference curve (dense, 0.25 m, extended 20 m beyond both ends); with ``g``
+    None the straight frame's ``(s, lat)``."""
+    if g is None:
+        rel = P - frame.origin
+        return rel @ frame.u, rel @ frame.n
     C, N, s = _reference(frame, g, lo - 20.0, hi + 20.0,
                          max(64, int((hi - lo + 40.0) / 0.25) + 1))
     _, i = cKDTree(C).query(P)
@@ -175,17 +220,12 @@ def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, points
     lateral positions of their borders [m] (``init._border_positions``); ``points``: per
     lane the (m_k, 2) points of its assigned trajectory parts (may be empty)."""
     lats = np.asarray(lats, float)
-    s_all, r_all, per_lane = [], [], []
-    for k, P in enumerate(points):
+    per_lane = []
+    for P in points:
         P = np.asarray(P, float).reshape(-1, 2)
-        rel = P - frame.origin
-        s, lat = rel @ frame.u, rel @ frame.n
-        ok = (s >= lo) & (s <= hi)
-        per_lane.append(P[ok])
-        s_all.append(s[ok])
-        r_all.append(lat[ok] - lats[k])
-    s_all, r_all = np.concatenate(s_all), np.concatenate(r_all)
-    g = select_offset(s_all, r_all, lo, hi, cfg)
+        s = (P - frame.origin) @ frame.u
+        per_lane.append(P[(s >= lo) & (s <= hi)])
+    g = _common_shift(frame, lats, per_lane, lo, hi, cfg)
     dev = _lane_deviations(frame, g, lats, per_lane, lo, hi, cfg) if cfg.follow_per_lane \
         else None
     if g is None and dev is None:
