@@ -30,6 +30,13 @@ _RANGES = {
     'follow_min_points': (4, 10**6, 'fewest trajectory points to shape an arm direction / lane'),
     'follow_gate': (0.1, 20.0, 'residuals beyond this after a first fit are dropped [m]'),
     'follow_iters': (0, 10, 'corrections of that shift measured along the shifted axis\'s normal'),
+    'follow_stop_margin': (0.0, 50.0, 'points this close beyond the stop line do not shape the '
+                           'lanes (turning traffic) [m]'),
+    'follow_max_weight': (0.01, 100.0, 'a point weighs the metres driven around it, at most this [m]'),
+    'follow_corr_length': (0.01, 1000.0, 'metres of one vehicle\'s path that count as one '
+                           'observation in the selection [m]'),
+    'follow_pool': (0, 1, '1: one shift per arm from the traffic of both directions, 0: per '
+                    'direction'),
     'follow_per_lane': (0, 1, '1: each lane with traffic also gets its own deviation'),
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
@@ -111,6 +118,10 @@ class LaneConfig:
     follow_min_points: int = 20
     follow_gate: float = 2.0
     follow_iters: int = 2
+    follow_stop_margin: float = 5.0
+    follow_max_weight: float = 3.0
+    follow_corr_length: float = 5.0
+    follow_pool: int = 0
     follow_per_lane: int = 0
     stop_fit: int = 1
     stop_search: float = 2.0

@@ -49,9 +49,9 @@ import numpy as np
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-from .spline import aic_prefers, second_differences
+from .spline import aic_prefers, moving_average, second_differences
 
-__all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'follow_borders']
+__all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'arm_shift', 'follow_borders']
 
 
 class OffsetFit:
@@ -82,82 +82,116 @@ class OffsetFit:
 
 
 def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing: float,
-               smooth: float) -> OffsetFit | None:
-    """Penalised least-squares cubic B-spline of residuals ``r`` [m] over ``s`` in
-    ``[lo, hi]`` [m] (module docstring, step 2), or None for too few points. The
-    penalty is scaled like the connector fit's: ``smooth * m / n`` on the squared second
-    differences of the ``n`` coefficients (``m`` points)."""
+               smooth: float, w: np.ndarray | None = None) -> OffsetFit | None:
+    """Penalised weighted least-squares cubic B-spline of residuals ``r`` [m] over ``s``
+    in ``[lo, hi]`` [m] (module docstring, step 2), or None for too few points. Weights
+    ``w`` (default 1) are metres driven per point; the penalty is scaled like the
+    connector fit's: ``smooth * sum(w) / n`` on the squared second differences of the
+    ``n`` coefficients."""
     if len(s) < 4 or hi - lo < 1e-6:
         return None
+    w = np.ones(len(s)) if w is None else np.asarray(w, float)
     n = int(np.clip(round((hi - lo) / ctrl_spacing) + 3, 4, 60))
     knots = np.r_[[lo] * 3, np.linspace(lo, hi, n - 2), [hi] * 3]
     B = BSpline.design_matrix(np.clip(s, lo, hi), knots, 3).toarray()
-    W = math.sqrt(smooth * len(s) / n) * second_differences(n)
-    H = B.T @ B + W.T @ W + 1e-9 * np.eye(n)
-    coef = np.linalg.solve(H, B.T @ r)
+    D = second_differences(n)
+    BtB = B.T @ (w[:, None] * B)
+    H = BtB + (smooth * w.sum() / n) * (D.T @ D) + 1e-9 * np.eye(n)
+    coef = np.linalg.solve(H, B.T @ (w * r))
     if not np.all(np.isfinite(coef)):
         return None
-    edf = float(np.trace(np.linalg.solve(H, B.T @ B)))
+    edf = float(np.trace(np.linalg.solve(H, BtB)))
     return OffsetFit(BSpline(knots, coef, 3), edf, lo, hi)
 
 
-def _gated_fit(s, r, lo, hi, cfg):
+def _gated_fit(s, r, w, lo, hi, cfg):
     """:func:`fit_offset` with one gated re-fit (``follow_gate`` [m]): (fit, kept mask) or
     None for fewer than ``follow_min_points`` points."""
     if len(s) < cfg.follow_min_points:
         return None
-    fit = fit_offset(s, r, lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth)
+    fit = fit_offset(s, r, lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth, w)
     if fit is None:
         return None
     keep = np.abs(r - fit(s)) <= cfg.follow_gate
     if keep.sum() < cfg.follow_min_points:
         return None
-    fit = fit_offset(s[keep], r[keep], lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth)
+    fit = fit_offset(s[keep], r[keep], lo, hi, cfg.follow_ctrl_spacing, cfg.follow_smooth,
+                     w[keep])
     return None if fit is None else (fit, keep)
 
 
-def _selected(r0: np.ndarray, r1: np.ndarray, edf: float, cfg) -> bool:
+def _selected(r0: np.ndarray, r1: np.ndarray, w: np.ndarray, edf: float, cfg) -> bool:
     """Residuals ``r1`` [m] of the fit beat ``r0`` of the straight lane by ``follow_select``
-    per effective degree of freedom (clipped at ``follow_gate``; ``spline.aic_prefers``)."""
+    per effective degree of freedom (``spline.aic_prefers``). Residuals are clipped at
+    ``follow_gate`` and weighted by metres driven; the points of one vehicle are not
+    independent, so ``follow_corr_length`` metres of driving count as one observation."""
     c = cfg.follow_gate
-    rss0 = float(np.sum(np.minimum(np.abs(r0), c) ** 2))
-    rss1 = float(np.sum(np.minimum(np.abs(r1), c) ** 2))
-    return aic_prefers(len(r0), rss0, rss1, edf, cfg.follow_select)
+    rss0 = float(np.sum(w * np.minimum(np.abs(r0), c) ** 2))
+    rss1 = float(np.sum(w * np.minimum(np.abs(r1), c) ** 2))
+    m = float(w.sum()) / cfg.follow_corr_length
+    return aic_prefers(m, rss0, rss1, edf, cfg.follow_select)
 
 
-def select_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, cfg) -> OffsetFit | None:
-    """Gated :func:`fit_offset` of residuals ``r`` [m] over ``s`` [m], kept only when it
-    beats ``g = 0`` (module docstring, step 3); None otherwise or for too few points."""
-    got = _gated_fit(s, r, lo, hi, cfg)
+def select_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, cfg,
+                  w: np.ndarray | None = None) -> OffsetFit | None:
+    """Gated :func:`fit_offset` of residuals ``r`` [m] over ``s`` [m] (weights ``w``
+    [m], default 1), kept only when it beats ``g = 0`` (module docstring, step 3); None
+    otherwise or for too few points."""
+    w = np.ones(len(s)) if w is None else np.asarray(w, float)
+    got = _gated_fit(s, r, w, lo, hi, cfg)
     if got is None:
         return None
     fit, keep = got
-    return fit if _selected(r[keep], r[keep] - fit(s[keep]), fit.edf, cfg) else None
+    return fit if _selected(r[keep], r[keep] - fit(s[keep]), w[keep], fit.edf, cfg) else None
 
 
-def _common_shift(frame, lats, per_lane, lo, hi, cfg) -> OffsetFit | None:
+def _common_shift(frame, lats, lanes, lo, hi, cfg) -> OffsetFit | None:
     """The shift ``g`` of all lanes of a direction (module docstring, steps 1-3): fitted
     to the lateral residuals in the straight frame, then ``follow_iters`` times
     corrected by a fit to the residuals measured along the normal of the shifted axis
-    (a lane ``lat`` beside a bent axis is not ``lat`` beside it in the straight frame)."""
+    (a lane ``lat`` beside a bent axis is not ``lat`` beside it in the straight frame).
+    ``lanes``: per lane (points (m, 2), weights (m,) [m])."""
+    lanes = [(P, w, k) for k, (P, w) in enumerate(lanes) if len(P)]
+    if not lanes:
+        return None
+    P_all = np.concatenate([P for P, _, _ in lanes])
+    w = np.concatenate([w for _, w, _ in lanes])
+    lat = np.concatenate([np.full(len(P), lats[k]) for P, _, k in lanes])
     g, keep, r0 = None, None, None
     for it in range(1 + cfg.follow_iters):
-        s_all, r_all = [], []
-        for k, P in enumerate(per_lane):
-            sk, ok = _signed_offsets(P, frame, g, lo, hi)
-            s_all.append(sk)
-            r_all.append(ok - lats[k])
-        s_all, r_all = np.concatenate(s_all), np.concatenate(r_all)
-        if it == 0:
-            r0 = r_all
-        got = _gated_fit(s_all, r_all, lo, hi, cfg)
+        s_all, off = _signed_offsets(P_all, frame, g, lo, hi)
+        r = off - lat
+        r0 = r if it == 0 else r0
+        got = _gated_fit(s_all, r, w, lo, hi, cfg)
         if got is None:
             return None
         delta, keep = got
         g = delta if g is None else g.plus(delta)
-    res = _signed_offsets(np.concatenate(per_lane), frame, g, lo, hi)[1] - \
-        np.concatenate([np.full(len(P), lats[k]) for k, P in enumerate(per_lane)])
-    return g if _selected(r0[keep], res[keep], g.edf, cfg) else None
+    res = _signed_offsets(P_all, frame, g, lo, hi)[1] - lat
+    return g if _selected(r0[keep], res[keep], w[keep], g.edf, cfg) else None
+
+
+def _driven(parts, frame, lo: float, hi: float, cfg):
+    """(points (m, 2), weights (m,) [m]) of one lane's trajectory parts between
+    ``lo + follow_stop_margin`` and ``hi`` along the axis: each point weighs the metres
+    its vehicle drove around it (positions smoothed over ``traffic_presmooth`` points,
+    at most ``follow_max_weight`` [m]), so a queue standing at the stop line does not
+    outweigh the vehicles that drove the lane."""
+    P_out, w_out = [], []
+    for xy in parts:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if len(xy) < 2:
+            continue
+        sm = moving_average(xy, cfg.traffic_presmooth)
+        step = np.linalg.norm(np.diff(sm, axis=0), axis=1)
+        w = 0.5 * (np.r_[step, 0.0] + np.r_[0.0, step])
+        s = (xy - frame.origin) @ frame.u
+        ok = (s >= lo + cfg.follow_stop_margin) & (s <= hi)
+        P_out.append(xy[ok])
+        w_out.append(np.minimum(w[ok], cfg.follow_max_weight))
+    if not P_out:
+        return np.zeros((0, 2)), np.zeros(0)
+    return np.concatenate(P_out), np.concatenate(w_out)
 
 
 def _reference(frame, g: OffsetFit | None, lo: float, hi: float, n_st: int):
@@ -189,15 +223,15 @@ def _signed_offsets(P: np.ndarray, frame, g: OffsetFit | None, lo: float, hi: fl
     return s[i], np.einsum('ij,ij->i', P - C[i], N[i])
 
 
-def _lane_deviations(frame, g, lats, points, lo, hi, cfg) -> np.ndarray:
+def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg):
     """(K, n) deviations ``e_k(s)`` [m] of each lane from the reference curve at axis
     distances ``s``: its own selected fit, else its nearest traffic-carrying neighbour's,
     else 0 (module docstring, step 5). Returns a function of ``s``."""
     fits: list = [None] * len(lats)
-    for k, P in enumerate(points):
+    for k, (P, w) in enumerate(lanes):
         if len(P):
             sk, ok = _signed_offsets(P, frame, g, lo, hi)
-            fits[k] = select_offset(sk, ok - lats[k], lo, hi, cfg)
+            fits[k] = select_offset(sk, ok - lats[k], lo, hi, cfg, w)
     have = [k for k, f in enumerate(fits) if f is not None]
 
     def dev(s):
@@ -211,23 +245,31 @@ def _lane_deviations(frame, g, lats, points, lo, hi, cfg) -> np.ndarray:
     return dev
 
 
-def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, points, cfg):
+def arm_shift(frame, lats, parts, lo: float, hi: float, cfg) -> OffsetFit | None:
+    """The selected common shift ``g(s)`` [m] of the given lanes (module docstring, steps
+    1-3), or None (straight). ``lats``: their lateral positions [m] (lanes of one
+    direction, or of both with ``follow_pool``: both directions of a road bend together);
+    ``parts``: per lane its assigned trajectory parts ((m, 2), time order)."""
+    lanes = [_driven(p, frame, lo, hi, cfg) for p in parts]
+    return _common_shift(frame, np.asarray(lats, float), lanes, lo, hi, cfg)
+
+
+def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, parts, cfg,
+                   g: OffsetFit | None):
     """Border polylines ``(K + 1, n_st, 2)`` of the ``K`` lanes of one arm direction,
-    ordered from ``s = lo`` (stop line) to ``hi`` [m], shaped by the traffic, or None when
-    the straight lanes explain it (module docstring).
+    ordered from ``s = lo`` (stop line) to ``hi`` [m], offset from the axis shifted by
+    ``g`` (:func:`arm_shift`) plus, with ``follow_per_lane``, each lane's deviation; None
+    when that leaves them straight (module docstring, steps 4-5).
 
     ``lats``: (K,) lateral positions of the lane center lines [m]; ``borders``: (K + 1,)
-    lateral positions of their borders [m] (``init._border_positions``); ``points``: per
-    lane the (m_k, 2) points of its assigned trajectory parts (may be empty)."""
+    lateral positions of their borders [m] (``init._border_positions``); ``parts``: per
+    lane the list of its assigned trajectory parts ((m, 2) points in time order; may be
+    empty)."""
     lats = np.asarray(lats, float)
-    per_lane = []
-    for P in points:
-        P = np.asarray(P, float).reshape(-1, 2)
-        s = (P - frame.origin) @ frame.u
-        per_lane.append(P[(s >= lo) & (s <= hi)])
-    g = _common_shift(frame, lats, per_lane, lo, hi, cfg)
-    dev = _lane_deviations(frame, g, lats, per_lane, lo, hi, cfg) if cfg.follow_per_lane \
-        else None
+    dev = None
+    if cfg.follow_per_lane:
+        lanes = [_driven(p, frame, lo, hi, cfg) for p in parts]
+        dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg)
     if g is None and dev is None:
         return None
     C, N, s = _reference(frame, g, lo, hi, n_st)

@@ -29,7 +29,7 @@ from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
-from .follow import follow_borders
+from .follow import arm_shift, follow_borders
 from .spline import traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
@@ -312,25 +312,44 @@ def _border_positions(lat: list[float], width: float) -> np.ndarray:
 
 
 def _lane_points(trajs) -> dict:
-    """(arm, direction, k) -> points (m, 2) of the trajectory parts assigned to that lane."""
+    """(arm, direction, k) -> the trajectory parts (m, 2) assigned to that lane."""
     out: dict = {}
     for tr in trajs:
         for d, lane in ((ENTERING, tr.lane_in), (LEAVING, tr.lane_out)):
             if lane is not None:
                 out.setdefault((lane[0], d, lane[1]), []).append(_part_points(tr, d))
-    return {k: np.concatenate(v) for k, v in out.items()}
+    return out
 
 
-def _arm_borders(f, d, b, stop, ext, n_st, lane_pts, ai, n_lanes, cfg):
+def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg) -> dict:
+    """direction -> common lateral shift of its lanes fitted to their traffic
+    (``lanes/follow.py``; None: straight), one per direction or, with ``follow_pool``,
+    one for the whole arm (both directions of a road bend together)."""
+    if not cfg.follow_lanes or not lane_pts:
+        return {}
+    keys = {d: [(d, k) for k in range(a.lanes_in if d == ENTERING else a.lanes_out)]
+            for d in exts}
+    groups = [list(exts)] if cfg.follow_pool else [[d] for d in exts]
+    out = {}
+    for dirs in groups:
+        lanes = [key for d in dirs for key in keys[d]]
+        parts = [lane_pts.get((ai, d, k), []) for d, k in lanes]
+        if any(parts):
+            g = arm_shift(f, [f.lat[key] for key in lanes], parts, stop,
+                          stop + max(exts[d] for d in dirs), cfg)
+            out.update({d: g for d in dirs})
+    return out
+
+
+def _arm_borders(f, d, b, stop, ext, n_st, lane_pts, ai, n_lanes, cfg, shifts):
     """(K + 1, n_st, 2) border polylines from the stop line outwards: straight (paper
     §III-A) or, with ``follow_lanes``, shaped by the lanes' traffic (``lanes/follow.py``)."""
     if cfg.follow_lanes and lane_pts:
-        pts = [lane_pts.get((ai, d, k), np.zeros((0, 2))) for k in range(n_lanes)]
-        if any(len(p) for p in pts):
-            shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
-                                    stop + ext, n_st, pts, cfg)
-            if shaped is not None:
-                return shaped
+        parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
+        shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
+                                stop + ext, n_st, parts, cfg, shifts.get(d))
+        if shaped is not None:
+            return shaped
     s = np.linspace(stop, stop + ext, n_st)
     return np.stack([f.point(s, bj) for bj in b])
 
@@ -342,14 +361,18 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
     lane_pts = _lane_points(trajs) if cfg.follow_lanes else {}
     for ai, a in enumerate(topo.arms):
         f = frames[ai]
+        exts = {d: _extent(far, ai, d, stops[ai], cfg, length) for d in (ENTERING, LEAVING)
+                if (a.lanes_in if d == ENTERING else a.lanes_out) > 0}
+        shifts = _follow_shifts(f, a, ai, stops[ai], exts, lane_pts, cfg)
         for d in (ENTERING, LEAVING):
             n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
             if n_lanes <= 0:
                 continue
             b = _border_positions([f.lat[(d, k)] for k in range(n_lanes)], f.width)
-            ext = _extent(far, ai, d, stops[ai], cfg, length)
+            ext = exts[d]
             n_st = max(2, int(round(ext / cfg.station_spacing)) + 1)
-            geo = _arm_borders(f, d, b, stops[ai], ext, n_st, lane_pts, ai, n_lanes, cfg)
+            geo = _arm_borders(f, d, b, stops[ai], ext, n_st, lane_pts, ai, n_lanes, cfg,
+                               shifts)
             if d == ENTERING:
                 geo = geo[:, ::-1]
             end = 0 if d == LEAVING else n_st - 1

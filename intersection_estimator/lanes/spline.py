@@ -33,7 +33,22 @@ from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
 __all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector',
-           'second_differences', 'aic_prefers']
+           'moving_average', 'second_differences', 'aic_prefers']
+
+
+def moving_average(xy: np.ndarray, n: int, tail: bool = True) -> np.ndarray:
+    """Points (m, 2) [m] smoothed by a centred moving average of ``n`` points; the first
+    and (``tail``) last ``n // 2``, where the window does not fit, stay as they are
+    (``tail=False``: zero-padded there, as the connector pieces always had it)."""
+    if n <= 1 or len(xy) < n:
+        return np.array(xy, float)
+    kern = np.ones(n) / n
+    out = np.stack([np.convolve(xy[:, d], kern, mode='same') for d in range(2)], 1)
+    h = n // 2
+    out[:h] = xy[:h]
+    if tail and h:
+        out[len(xy) - h:] = xy[len(xy) - h:]
+    return out
 
 
 def second_differences(n: int) -> np.ndarray:
@@ -67,11 +82,7 @@ def connector_pieces(trajs_xy: list[np.ndarray], c0: np.ndarray, c1: np.ndarray,
         if i1 - i0 < 2:
             continue
         lo, hi = max(0, i0 - presmooth), min(len(xy), i1 + presmooth + 1)
-        seg = xy[lo:hi]
-        if presmooth > 1 and len(seg) >= presmooth:
-            kern = np.ones(presmooth) / presmooth
-            seg = np.stack([np.convolve(seg[:, d], kern, mode='same') for d in range(2)], 1)
-            seg[:presmooth // 2] = xy[lo:lo + presmooth // 2]
+        seg = moving_average(xy[lo:hi], presmooth, tail=False)
         out.append(seg[i0 - lo:i0 - lo + (i1 - i0) + 1])
     return out
 
