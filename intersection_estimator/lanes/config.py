@@ -113,14 +113,14 @@ class LaneConfig:
     traffic_select: float = 2.0
     follow_lanes: int = 0
     follow_ctrl_spacing: float = 10.0
-    follow_smooth: float = 0.05
+    follow_smooth: float = 0.5
     follow_select: float = 2.0
     follow_min_points: int = 20
     follow_gate: float = 2.0
     follow_iters: int = 2
-    follow_stop_margin: float = 5.0
+    follow_stop_margin: float = 0.0
     follow_max_weight: float = 3.0
-    follow_corr_length: float = 5.0
+    follow_corr_length: float = 3.0
     follow_pool: int = 0
     follow_per_lane: int = 0
     stop_fit: int = 1
