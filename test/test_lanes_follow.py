@@ -15,7 +15,7 @@ from intersection_estimator.lanes.init import (Trajectory, fit_frames, lane_spec
 from intersection_estimator.model import Arm, Intersection
 
 LAT = (1.75, 5.25)          # entering lane centers of arm 0 (right-hand traffic, +n side)
-CFG = LaneConfig()
+CFG = replace(LaneConfig(), follow_lanes=0)     # straight approach lanes (paper §III-A)
 ON = replace(CFG, follow_lanes=1)
 
 

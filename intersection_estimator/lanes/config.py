@@ -35,8 +35,6 @@ _RANGES = {
     'follow_max_weight': (0.01, 100.0, 'a point weighs the metres driven around it, at most this [m]'),
     'follow_corr_length': (0.01, 1000.0, 'metres of one vehicle\'s path that count as one '
                            'observation in the selection [m]'),
-    'follow_pool': (0, 1, '1: one shift per arm from the traffic of both directions, 0: per '
-                    'direction'),
     'follow_per_lane': (0, 1, '1: each lane with traffic also gets its own deviation'),
     'stop_fit': (0, 1, '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': (0.0, 20.0, 'search range around the geometric stop distance [m]'),
@@ -111,7 +109,7 @@ class LaneConfig:
     traffic_smooth: float = 10.0
     traffic_min_points: int = 10
     traffic_select: float = 2.0
-    follow_lanes: int = 0
+    follow_lanes: int = 1
     follow_ctrl_spacing: float = 10.0
     follow_smooth: float = 0.5
     follow_select: float = 2.0
@@ -120,8 +118,7 @@ class LaneConfig:
     follow_iters: int = 2
     follow_stop_margin: float = 0.0
     follow_max_weight: float = 3.0
-    follow_corr_length: float = 3.0
-    follow_pool: int = 0
+    follow_corr_length: float = 4.0
     follow_per_lane: int = 0
     stop_fit: int = 1
     stop_search: float = 2.0

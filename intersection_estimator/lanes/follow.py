@@ -12,19 +12,25 @@ Per arm and driving direction (the straight frame ``origin + s u + lat n`` of
 ``init.ArmFrame``, lanes at lateral positions ``lat_k``):
 
 1. the trajectory parts the lane estimator assigned to lane ``k`` (``Trajectory.lane_in``
-   / ``lane_out``) give points ``(s, lat)`` between the stop line and the far end of the
-   lanelet; their residuals ``r = lat - lat_k`` measure how far the traffic is beside the
-   straight lane;
+   / ``lane_out``, ``init.assign_parts``) give points ``(s, lat)`` between
+   ``follow_stop_margin`` beyond the stop line and the far end of the lanelet; their
+   residuals ``r = lat - lat_k`` measure how far the traffic is beside the straight
+   lane. Each point weighs the metres its vehicle drove around it (capped), so a queue
+   standing at the stop line does not outweigh the vehicles that drove the lane;
 2. one common lateral shift ``g(s)`` of all lanes of the direction is fitted to the
    residuals of all its lanes: a clamped cubic B-spline in ``s`` (about one control
-   point per ``follow_ctrl_spacing`` metres) by penalised linear least squares
-   (second-difference penalty ``follow_smooth`` as in the connector fit of
-   ``lanes/spline.py``), residuals beyond ``follow_gate`` of a first fit are dropped
-   (lane changes, wrong assignments) and the fit repeated;
+   point per ``follow_ctrl_spacing`` metres) by penalised weighted linear least squares
+   (second-difference penalty ``follow_smooth``, scaled as in the connector fit of
+   ``lanes/spline.py``); residuals beyond ``follow_gate`` of a first fit are dropped
+   (lane changes, wrong assignments) and the fit repeated. A lane ``lat`` beside a bent
+   axis is not ``lat`` beside it in the straight frame, so ``follow_iters`` times the
+   residuals are re-measured along the normal of the shifted axis and the fit corrected;
 3. model selection: the shift is kept only when it explains the points better than the
    straight lane by more than ``follow_select`` per effective degree of freedom (the
-   trace of the smoother's hat matrix; ``spline.aic_prefers``, 2 = Akaike) -- a straight
-   road stays straight;
+   trace of the smoother's hat matrix; ``spline.aic_prefers``, 2 = Akaike), with
+   ``follow_corr_length`` metres of one vehicle's path counted as one observation (its
+   points are not independent: counted per point, the rule accepted the vehicles' own
+   wobble on straight roads) -- a straight road stays straight;
 4. the shifted axis ``R(s) = origin + s u + g(s) n`` is the reference curve of the
    direction; its stations are placed at equal arc length and the lane borders are
    offset along its unit normal ``N`` by their lateral positions, so the lanes keep their
@@ -55,13 +61,19 @@ __all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'arm_shift', 'follow_bord
 
 
 class OffsetFit:
-    """A smoothing B-spline ``g(s)`` [m] of lateral offset vs axis distance ``s`` [m]."""
+    """A smoothing B-spline ``g(s)`` [m] of lateral offset vs axis distance ``s`` [m],
+    continued linearly (with its end slopes) beyond ``[lo, hi]``."""
 
     def __init__(self, spline: BSpline, edf: float, lo: float, hi: float):
         self.spline, self.edf, self.lo, self.hi = spline, edf, lo, hi
+        self._d = spline.derivative()
+        self._d_lo, self._d_hi = float(self._d(lo)), float(self._d(hi))
 
     def __call__(self, s) -> np.ndarray:
-        return self.spline(np.clip(s, self.lo, self.hi)) + self._extrapolate(s)
+        s = np.asarray(s, float)
+        return (self.spline(np.clip(s, self.lo, self.hi))
+                + np.minimum(s - self.lo, 0.0) * self._d_lo
+                + np.maximum(s - self.hi, 0.0) * self._d_hi)
 
     def plus(self, other: 'OffsetFit') -> 'OffsetFit':
         """``g + other`` (same knots): a correction fitted in the frame of ``g``."""
@@ -70,15 +82,7 @@ class OffsetFit:
 
     def slope(self, s) -> np.ndarray:
         """dg/ds (dimensionless); constant beyond the fitted range."""
-        return self.spline.derivative()(np.clip(s, self.lo, self.hi))
-
-    def _extrapolate(self, s) -> np.ndarray:
-        """Linear continuation beyond ``[lo, hi]`` with the end slopes."""
-        s = np.asarray(s, float)
-        d = self.spline.derivative()
-        below = np.minimum(s - self.lo, 0.0) * d(self.lo)
-        above = np.maximum(s - self.hi, 0.0) * d(self.hi)
-        return below + above
+        return self._d(np.clip(s, self.lo, self.hi))
 
 
 def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing: float,
@@ -166,6 +170,9 @@ def _common_shift(frame, lats, lanes, lo, hi, cfg) -> OffsetFit | None:
         if got is None:
             return None
         delta, keep = got
+        if it == 0 and not _selected(r[keep], r[keep] - delta(s_all[keep]), w[keep],
+                                     delta.edf, cfg):
+            return None            # the straight lane explains it: no corrections needed
         g = delta if g is None else g.plus(delta)
     res = _signed_offsets(P_all, frame, g, lo, hi)[1] - lat
     return g if _selected(r0[keep], res[keep], w[keep], g.edf, cfg) else None
@@ -247,9 +254,8 @@ def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg):
 
 def arm_shift(frame, lats, parts, lo: float, hi: float, cfg) -> OffsetFit | None:
     """The selected common shift ``g(s)`` [m] of the given lanes (module docstring, steps
-    1-3), or None (straight). ``lats``: their lateral positions [m] (lanes of one
-    direction, or of both with ``follow_pool``: both directions of a road bend together);
-    ``parts``: per lane its assigned trajectory parts ((m, 2), time order)."""
+    1-3), or None (straight). ``lats``: their lateral positions [m] (the lanes of one
+    arm direction); ``parts``: per lane its assigned trajectory parts ((m, 2), time order)."""
     lanes = [_driven(p, frame, lo, hi, cfg) for p in parts]
     return _common_shift(frame, np.asarray(lats, float), lanes, lo, hi, cfg)
 

@@ -323,21 +323,16 @@ def _lane_points(trajs) -> dict:
 
 def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg) -> dict:
     """direction -> common lateral shift of its lanes fitted to their traffic
-    (``lanes/follow.py``; None: straight), one per direction or, with ``follow_pool``,
-    one for the whole arm (both directions of a road bend together)."""
+    (``lanes/follow.py``; None: straight)."""
     if not cfg.follow_lanes or not lane_pts:
         return {}
-    keys = {d: [(d, k) for k in range(a.lanes_in if d == ENTERING else a.lanes_out)]
-            for d in exts}
-    groups = [list(exts)] if cfg.follow_pool else [[d] for d in exts]
     out = {}
-    for dirs in groups:
-        lanes = [key for d in dirs for key in keys[d]]
-        parts = [lane_pts.get((ai, d, k), []) for d, k in lanes]
+    for d, ext in exts.items():
+        n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
+        parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
         if any(parts):
-            g = arm_shift(f, [f.lat[key] for key in lanes], parts, stop,
-                          stop + max(exts[d] for d in dirs), cfg)
-            out.update({d: g for d in dirs})
+            out[d] = arm_shift(f, [f.lat[(d, k)] for k in range(n_lanes)], parts, stop,
+                               stop + ext, cfg)
     return out
 
 
