@@ -49,8 +49,6 @@ knows how the simulators draw their roads: the curve is a generic smoothing spli
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
