@@ -23,6 +23,21 @@ _RANGES = {
     'traffic_min_points': ('[3, 1e6]', 'fewest trajectory points to shape a connector'),
     'traffic_select': ('[0.0, 1000.0]', 'the fit replaces the start shape only when better by this '
                        'per parameter (2: Akaike; 0: always)'),
+    'follow_lanes': ('[0, 1]', '1: entering/leaving lanelets shaped by their traffic (lanes/follow.py), '
+                     '0: straight along the arm (paper)'),
+    'follow_ctrl_spacing': ('[1.0, 100.0]', 'axis distance per control point of that shift [m]'),
+    'follow_smooth': ('[0.0, 1e6]', 'second-difference penalty on its coefficients'),
+    'follow_select': ('[0.0, 1000.0]', 'the shift is kept only when better by this per effective '
+                      'degree of freedom (2: Akaike; 0: always)'),
+    'follow_min_points': ('[4, 1e6]', 'fewest trajectory points to shape an arm direction / lane'),
+    'follow_gate': ('[0.1, 20.0]', 'residuals beyond this after a first fit are dropped [m]'),
+    'follow_iters': ('[0, 10]', 'corrections of that shift measured along the shifted axis\'s normal'),
+    'follow_stop_margin': ('[0.0, 50.0]', 'points this close beyond the stop line do not shape the '
+                           'lanes (turning traffic) [m]'),
+    'follow_max_weight': ('[0.01, 100.0]', 'a point weighs the metres driven around it, at most this [m]'),
+    'follow_corr_length': ('[0.01, 1000.0]', 'metres of one vehicle\'s path that count as one '
+                           'observation in the selection [m]'),
+    'follow_per_lane': ('[0, 1]', '1: each lane with traffic also gets its own deviation'),
     'stop_fit': ('[0, 1]', '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': ('[0.0, 20.0]', 'search range around the geometric stop distance [m]'),
     'stop_step': ('[0.01, 5.0]', 'grid step of the stop-distance search [m]'),
@@ -96,6 +111,17 @@ class LaneConfig:
     traffic_smooth: float = 10.0
     traffic_min_points: int = 10
     traffic_select: float = 2.0
+    follow_lanes: int = 1
+    follow_ctrl_spacing: float = 10.0
+    follow_smooth: float = 0.5
+    follow_select: float = 2.0
+    follow_min_points: int = 20
+    follow_gate: float = 2.0
+    follow_iters: int = 2
+    follow_stop_margin: float = 0.0
+    follow_max_weight: float = 3.0
+    follow_corr_length: float = 4.0
+    follow_per_lane: int = 0
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25

@@ -29,6 +29,7 @@ from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
+from .follow import arm_shift, follow_borders
 from .spline import traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
@@ -310,22 +311,65 @@ def _border_positions(lat: list[float], width: float) -> np.ndarray:
     return b
 
 
+def _lane_points(trajs) -> dict:
+    """(arm, direction, k) -> the trajectory parts (m, 2) assigned to that lane."""
+    out: dict = {}
+    for tr in trajs:
+        for d, lane in ((ENTERING, tr.lane_in), (LEAVING, tr.lane_out)):
+            if lane is not None:
+                out.setdefault((lane[0], d, lane[1]), []).append(_part_points(tr, d))
+    return out
+
+
+def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg) -> dict:
+    """direction -> common lateral shift of its lanes fitted to their traffic
+    (``lanes/follow.py``; None: straight)."""
+    if not cfg.follow_lanes or not lane_pts:
+        return {}
+    out = {}
+    for d, ext in exts.items():
+        n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
+        parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
+        if any(parts):
+            out[d] = arm_shift(f, [f.lat[(d, k)] for k in range(n_lanes)], parts, stop,
+                               stop + ext, cfg)
+    return out
+
+
+def _arm_borders(f, d, b, stop, ext, n_st, lane_pts, ai, n_lanes, cfg, shifts):
+    """(K + 1, n_st, 2) border polylines from the stop line outwards: straight (paper
+    §III-A) or, with ``follow_lanes``, shaped by the lanes' traffic (``lanes/follow.py``)."""
+    if cfg.follow_lanes and lane_pts:
+        parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
+        shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
+                                stop + ext, n_st, parts, cfg, shifts.get(d))
+        if shaped is not None:
+            return shaped
+    s = np.linspace(stop, stop + ext, n_st)
+    return np.stack([f.point(s, bj) for bj in b])
+
+
 def _straight_lanes(topo, frames, stops, trajs, cfg, length):
     """Entering/leaving specs and the interior neighbour pairs of each arm."""
     specs, pairs, index = [], [], {}
     far = _farthest(trajs, frames) if length is None else {}
+    lane_pts = _lane_points(trajs) if cfg.follow_lanes else {}
     for ai, a in enumerate(topo.arms):
         f = frames[ai]
+        exts = {d: _extent(far, ai, d, stops[ai], cfg, length) for d in (ENTERING, LEAVING)
+                if (a.lanes_in if d == ENTERING else a.lanes_out) > 0}
+        shifts = _follow_shifts(f, a, ai, stops[ai], exts, lane_pts, cfg)
         for d in (ENTERING, LEAVING):
             n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
             if n_lanes <= 0:
                 continue
             b = _border_positions([f.lat[(d, k)] for k in range(n_lanes)], f.width)
-            ext = _extent(far, ai, d, stops[ai], cfg, length)
+            ext = exts[d]
             n_st = max(2, int(round(ext / cfg.station_spacing)) + 1)
-            s = np.linspace(stops[ai], stops[ai] + ext, n_st)
+            geo = _arm_borders(f, d, b, stops[ai], ext, n_st, lane_pts, ai, n_lanes, cfg,
+                               shifts)
             if d == ENTERING:
-                s = s[::-1]
+                geo = geo[:, ::-1]
             end = 0 if d == LEAVING else n_st - 1
             first = len(specs)
             for k in range(n_lanes):
@@ -337,7 +381,7 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
                 lk[end], rk[end] = ('end', ai, d, li), ('end', ai, d, ri)
                 specs.append(LaneletSpec(
                     id=lane_id(ai, d, k), kind='entering' if d == ENTERING else 'leaving',
-                    arm=ai, left=f.point(s, b[li]), right=f.point(s, b[ri]), left_keys=lk,
+                    arm=ai, left=geo[li].copy(), right=geo[ri].copy(), left_keys=lk,
                     right_keys=rk, lane_index=k))
                 index[(ai, d, k)] = len(specs) - 1
             # neighbour k shares its outer border with k+1's inner border (interior stations)

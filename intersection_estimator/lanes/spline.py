@@ -32,7 +32,41 @@ import numpy as np
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-__all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector']
+__all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector',
+           'moving_average', 'second_differences', 'aic_prefers']
+
+
+def moving_average(xy: np.ndarray, n: int, tail: bool = True) -> np.ndarray:
+    """Points (m, 2) [m] smoothed by a centred moving average of ``n`` points; the first
+    and (``tail``) last ``n // 2``, where the window does not fit, stay as they are
+    (``tail=False``: zero-padded there, as the connector pieces always had it)."""
+    if n <= 1 or len(xy) < n:
+        return np.array(xy, float)
+    kern = np.ones(n) / n
+    out = np.stack([np.convolve(xy[:, d], kern, mode='same') for d in range(2)], 1)
+    h = n // 2
+    out[:h] = xy[:h]
+    if tail and h:
+        out[len(xy) - h:] = xy[len(xy) - h:]
+    return out
+
+
+def second_differences(n: int) -> np.ndarray:
+    """(n - 2, n) matrix of second differences of n control points (the smoothness rows
+    of the connector fit here and of the approach-lane fit in ``lanes/follow.py``)."""
+    D = np.zeros((max(n - 2, 0), n))
+    for i in range(n - 2):
+        D[i, i:i + 3] = (1.0, -2.0, 1.0)
+    return D
+
+
+def aic_prefers(m: int, rss_start: float, rss_fit: float, n_params: float,
+                penalty: float) -> bool:
+    """The selection rule of :func:`prefer_fit`: ``m log(RSS_start / RSS_fit) > penalty *
+    n_params`` (``penalty = 2``: Akaike's criterion for Gaussian residuals; 0: always)."""
+    if penalty <= 0:
+        return True
+    return m * math.log(max(rss_start, 1e-12) / max(rss_fit, 1e-12)) > penalty * n_params
 
 
 def connector_pieces(trajs_xy: list[np.ndarray], c0: np.ndarray, c1: np.ndarray,
@@ -48,11 +82,7 @@ def connector_pieces(trajs_xy: list[np.ndarray], c0: np.ndarray, c1: np.ndarray,
         if i1 - i0 < 2:
             continue
         lo, hi = max(0, i0 - presmooth), min(len(xy), i1 + presmooth + 1)
-        seg = xy[lo:hi]
-        if presmooth > 1 and len(seg) >= presmooth:
-            kern = np.ones(presmooth) / presmooth
-            seg = np.stack([np.convolve(seg[:, d], kern, mode='same') for d in range(2)], 1)
-            seg[:presmooth // 2] = xy[lo:lo + presmooth // 2]
+        seg = moving_average(xy[lo:hi], presmooth, tail=False)
         out.append(seg[i0 - lo:i0 - lo + (i1 - i0) + 1])
     return out
 
@@ -111,9 +141,7 @@ def _solve(Q, u, knots, c0, t0, c1, t1, smooth):
     Md = np.einsum('mj,jdz->mdz', B, A).reshape(-1, nz)
     rd = (Q - B @ b).reshape(-1)
     # smoothness rows: second differences of the control points
-    D = np.zeros((n - 2, n))
-    for i in range(n - 2):
-        D[i, i:i + 3] = (1.0, -2.0, 1.0)
+    D = second_differences(n)
     Ms = math.sqrt(smooth * len(Q) / max(n, 1)) * np.einsum('kj,jdz->kdz', D, A).reshape(-1, nz)
     rs = -math.sqrt(smooth * len(Q) / max(n, 1)) * (D @ b).reshape(-1)
     z, *_ = np.linalg.lstsq(np.vstack([Md, Ms]), np.concatenate([rd, rs]), rcond=None)
@@ -153,8 +181,7 @@ def prefer_fit(pieces, fitted: np.ndarray, start: np.ndarray, n_params: int,
     if penalty <= 0:
         return True
     Q = np.concatenate(pieces)
-    r_fit, r_start = _rss(Q, fitted, clip), _rss(Q, start, clip)
-    return len(Q) * math.log(max(r_start, 1e-12) / max(r_fit, 1e-12)) > penalty * n_params
+    return aic_prefers(len(Q), _rss(Q, start, clip), _rss(Q, fitted, clip), n_params, penalty)
 
 
 def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):

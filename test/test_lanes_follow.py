@@ -1,0 +1,133 @@
+"""Approach lanes shaped by their traffic (lanes/follow.py)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+
+import numpy as np
+
+from intersection_estimator.evaluate import lane_distance
+from intersection_estimator.lanes import LaneConfig
+from intersection_estimator.lanes.follow import fit_offset, select_offset
+from intersection_estimator.lanes.init import (Trajectory, fit_frames, lane_specs,
+                                               split_at_center, stop_distances)
+from intersection_estimator.model import Arm, Intersection
+
+LAT = (1.75, 5.25)          # entering lane centers of arm 0 (right-hand traffic, +n side)
+CFG = replace(LaneConfig(), follow_lanes=0)     # straight approach lanes (paper §III-A)
+ON = replace(CFG, follow_lanes=1)
+
+
+def _topology():
+    """T junction: arm 0 (+x) with two entering lanes, arms at 90 and 180 deg."""
+    return Intersection(np.zeros(2), [Arm(0.0, lanes_in=2, lanes_out=1),
+                                      Arm(math.pi / 2), Arm(math.pi, lanes_in=1, lanes_out=2)])
+
+
+def _approach(lat: float, s0: float, radius: float, length: float = 70.0, step: float = 1.0):
+    """True center line of an entering lane of arm 0 from its far end to x = 0: straight
+    along +x up to ``s0``, beyond it an arc of ``radius`` [m] bending to +y (inf:
+    straight), the lane ``lat`` [m] left of the road axis."""
+    sig = np.arange(length, 0.0, -step)
+    if math.isinf(radius):
+        far = np.stack([s0 + sig, np.full_like(sig, lat)], axis=1)
+    else:
+        a = sig / radius
+        axis = np.stack([s0 + radius * np.sin(a), radius * (1 - np.cos(a))], axis=1)
+        far = axis + lat * np.stack([-np.sin(a), np.cos(a)], axis=1)
+    near = np.stack([np.arange(s0, 0.0, -step), np.full(int(math.ceil(s0 / step)), lat)], 1)
+    return np.concatenate([far, near])
+
+
+def _trajs(lanes, radius, rng, per_lane=6, noise=0.25):
+    """Vehicles driving ``lanes`` of arm 0 into the junction and on along arm 2 (-x)."""
+    stop = float(stop_distances(_topology(), CFG)[0])
+    out = []
+    for k in lanes:
+        for _ in range(per_lane):
+            line = np.concatenate([_approach(LAT[k], stop, radius),
+                                   np.stack([-np.arange(1.0, 60.0), np.full(59, LAT[0])], 1)])
+            xy = line + rng.normal(0, 0.15, 2) * [0, 1] + rng.normal(0, noise, line.shape)
+            tr = Trajectory(len(out), xy)
+            tr.split = split_at_center(xy, np.zeros(2))
+            tr.lane_in, tr.lane_out = (0, k), (2, 0)
+            out.append(tr)
+    return out, stop
+
+
+def _specs(trajs, cfg):
+    topo = _topology()
+    stops = stop_distances(topo, cfg)
+    frames = fit_frames(topo, trajs, stops, cfg)
+    specs, _, index = lane_specs(topo, trajs, cfg, stops=stops, frames=frames)
+    return specs, index
+
+
+def _errors(specs, index, stop, radius):
+    """Mean distance [m] of each entering lanelet of arm 0 to its true center line."""
+    out = []
+    for k in (0, 1):
+        E = specs[index[(0, 1, k)]]
+        truth = _approach(LAT[k], stop, radius, length=150.0, step=0.2)
+        out.append(lane_distance(0.5 * (E.left + E.right), truth[truth[:, 0] >= stop - 1]))
+    return out
+
+
+def _connectors_meet(specs):
+    for c in (s for s in specs if s.kind == 'connector'):
+        E, O = specs[c.predecessor], specs[c.successor]
+        assert np.allclose(c.left[0], E.left[-1]) and np.allclose(c.right[0], E.right[-1])
+        assert np.allclose(c.left[-1], O.left[0]) and np.allclose(c.right[-1], O.right[0])
+
+
+def test_curved_approach_follows_the_traffic():
+    radius = 140.0                                   # ~29 deg of bend over 70 m
+    trajs, stop = _trajs((0, 1), radius, np.random.default_rng(1))
+    before = _errors(*_specs(trajs, CFG), stop, radius)
+    specs, index = _specs(trajs, ON)
+    after = _errors(specs, index, stop, radius)
+    assert max(after) < 0.3 and max(after) < 0.25 * min(before), (before, after)
+    _connectors_meet(specs)
+    # the lanes keep their width across the bend (borders offset along the curve's normal)
+    E = specs[index[(0, 1, 0)]]
+    w = np.linalg.norm(E.left - E.right, axis=1)
+    assert np.ptp(w) < 0.05, w
+
+
+def test_straight_approach_stays_straight():
+    trajs, _ = _trajs((0, 1), math.inf, np.random.default_rng(2))
+    off, _ = _specs(trajs, CFG)
+    on, _ = _specs(trajs, ON)
+    for a, b in zip(off, on):
+        assert np.array_equal(a.left, b.left) and np.array_equal(a.right, b.right), a.id
+
+
+def test_selection_rejects_a_shift_in_pure_noise():
+    rng = np.random.default_rng(3)
+    s = rng.uniform(10, 90, 400)
+    assert select_offset(s, rng.normal(0, 0.3, 400), 10.0, 90.0, ON) is None
+    bent = 0.002 * (s - 10) ** 2                     # 12.8 m at the far end
+    fit = select_offset(s, bent + rng.normal(0, 0.3, 400), 10.0, 90.0, ON)
+    err = np.abs(fit(s) - bent)
+    assert fit is not None and err.max() < 0.1 * bent.max() and err.mean() < 0.15, err
+    # the effective degrees of freedom fall with the smoothing penalty
+    assert fit_offset(s, bent, 10.0, 90.0, 10.0, 1e4).edf < fit_offset(s, bent, 10.0, 90.0,
+                                                                        10.0, 0.0).edf
+
+
+def test_lane_without_traffic_moves_with_its_neighbour():
+    radius = 140.0
+    trajs, stop = _trajs((0,), radius, np.random.default_rng(4), per_lane=10)
+    before = _errors(*_specs(trajs, CFG), stop, radius)
+    specs, index = _specs(trajs, ON)
+    after = _errors(specs, index, stop, radius)
+    assert after[1] < 0.5 * before[1], (before, after)
+    # parallel: lane 1 shares lane 0's outer border and keeps its width
+    L0, L1 = specs[index[(0, 1, 0)]], specs[index[(0, 1, 1)]]
+    shared = [np.allclose(L1.right, L0.left), np.allclose(L1.left, L0.right)]
+    assert any(shared)
+    w0 = np.linalg.norm(L0.left - L0.right, axis=1)
+    w1 = np.linalg.norm(L1.left - L1.right, axis=1)
+    assert np.allclose(w0, w1, atol=0.05)
+    _connectors_meet(specs)
