@@ -208,8 +208,8 @@ class TopologyConfig:
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0
     max_center_dist: float = math.inf
-    track_radius: float = math.inf
-    trim_longest: bool = False
+    track_radius: float = 75.0
+    trim_longest: bool = True
     arm_reach: float = 18.0
     recenter_threshold: float = 2.0
     recenter_window: int = 2500

@@ -159,12 +159,17 @@ def test_track_radius_keeps_the_part_next_to_the_box():
     track_radius describe the straight piece of a curved approach; without it the bend
     pulls them off the lane."""
     dets = _curved_approach()
-    whole = tracked_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=20.0))
+    whole = tracked_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=20.0, track_radius=math.inf,
+                                                           trim_longest=False))
     near = tracked_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=20.0, track_radius=65.0,
                                                                trim_longest=True))
     assert len(whole) == len(near) == 1
     assert abs(near.y[0] + 1.75) < 0.05 and abs(near.hy[0]) < 0.02
     assert abs(whole.y[0] + 1.75) > 1.0 or abs(whole.hy[0]) > 0.1
+    # each alone is not enough: the radius keeps part of the bend, which the far-end run keeps
+    first = tracked_observations(dets, (0.0, 0.0), replace(CFG, min_center_dist=20.0, track_radius=65.0,
+                                                           trim_longest=False))
+    assert abs(first.y[0] + 1.75) > 1.0 or abs(first.hy[0]) > 0.1
     # no row within the radius: no part
     assert len(tracked_observations(dets, (500.0, 0.0), replace(CFG, track_radius=30.0))) == 0
 
