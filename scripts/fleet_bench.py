@@ -51,6 +51,31 @@ FAMILY = 'table1'             # --family
 CFG = ChangeConfig()
 
 
+def _snap_connectors(lls) -> None:
+    """SUMO's ground truth as a Lanelet2 map: SUMO's internal lanes (our connectors) start
+    and end 0.1-0.4 m from the lanes they join, so lanelet2's routing graph (shared end
+    points) would see no connection and the map no intersection. A map's lanelets share
+    their end points; move each connector's ends onto its entering / leaving lane (only
+    the virtual connector pieces change, never an entering or leaving lane)."""
+    by = {l.id: l for l in lls}
+    for l in lls:
+        if l.kind == 'connector':
+            continue
+        for sid in l.successors:                       # entering lane -> connector
+            c = by.get(sid)
+            if c is not None and c.kind == 'connector':
+                c.left[0], c.right[0] = l.left[-1], l.right[-1]
+                c.center[0] = 0.5 * (c.left[0] + c.right[0])
+    for c in lls:
+        if c.kind != 'connector':
+            continue
+        for sid in c.successors:                       # connector -> leaving lane
+            o = by.get(sid)
+            if o is not None and o.kind != 'connector':
+                c.left[-1], c.right[-1] = o.left[0], o.right[0]
+                c.center[-1] = 0.5 * (c.left[-1] + c.right[-1])
+
+
 def _scenario(seed: int):
     """Case ``seed`` of the --family (SUMO cases pickled into --cache: SUMO costs seconds)."""
     import pickle
@@ -59,10 +84,12 @@ def _scenario(seed: int):
     from intersection_estimator.scenarios.sumo import sumo_scenario
     f = None if CACHE is None else CACHE / f'sumo_scenario_{seed}.pkl'
     if f is not None and f.exists():
-        return pickle.loads(f.read_bytes())
-    sc = sumo_scenario(seed)
-    if f is not None:
-        f.write_bytes(pickle.dumps(sc))
+        sc = pickle.loads(f.read_bytes())
+    else:
+        sc = sumo_scenario(seed)
+        if f is not None:
+            f.write_bytes(pickle.dumps(sc))
+    _snap_connectors(sc.gt_lanelets)
     return sc
 
 
