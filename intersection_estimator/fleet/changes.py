@@ -61,12 +61,13 @@ class ChangeConfig:
     moved_m: float = 0.75                  # lane moved beyond this mean offset [m]
     absence_prior: float = 0.2             # prior probability that an element without traffic is gone
     min_confidence: float = 0.5            # fused confidence to report a change
+    change_prior: float = 0.5              # prior probability of a positive change (arm/lane/turn added, moved)
 
     def validate(self) -> None:
         for name in ('gate_m', 'arm_gate_deg', 'moved_m'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0 (got {getattr(self, name)})')
-        for name in ('min_confidence', 'absence_prior'):
+        for name in ('min_confidence', 'absence_prior', 'change_prior'):
             if not 0.0 < getattr(self, name) < 1.0:
                 raise ValueError(f'{name} must be in (0, 1) (got {getattr(self, name)})')
 
@@ -102,7 +103,8 @@ class DriveView:
     total_conf: float               # confidence that the drive saw the intersection at all
     passages: float
     unobserved: list[int]           # mapped arms without traffic (nothing claimed)
-    weak: list = field(default_factory=list)   # absences below 0.5 in this drive (for fusion)
+    weak: list = field(default_factory=list)   # findings below 0.5 in this drive (for fusion)
+    lanes_seen: set = field(default_factory=set)   # mapped lane ids an estimated lane with traffic lay on
 
     def contradiction(self, f: Finding) -> float:
         """How strongly this drive (not showing ``f``) speaks against ``f`` (0 = it cannot).
@@ -117,7 +119,9 @@ class DriveView:
         if f.kind == 'arm_removed':
             return P_MAX if seen > 0.5 else 0.0
         if f.kind == 'lane_removed':
-            return P_MAX if ok and seen > 0.5 else 0.0
+            # the drive's vehicles drove the mapped lane(s) the finding says are gone
+            there = bool(f.map_lanes) and all(l in self.lanes_seen for l in f.map_lanes)
+            return P_MAX if (there or ok) and seen > 0.5 else 0.0
         if f.kind in ('lane_moved', 'lane_added'):             # only a drive with the mapped count
             return seen if ok else 0.0
         if f.kind == 'connector_unused':
@@ -136,6 +140,15 @@ P_MAX = 0.999        # no single drive is certain
 def _logit(p: float) -> float:
     p = min(max(p, 0.5), P_MAX)
     return math.log(p / (1.0 - p))
+
+
+def _positive(kind, key, p, cfg, **kw) -> Finding:
+    """A positive finding: the drive's evidence ``p`` (an arm's posterior confidence) as log
+    likelihood ratio ``logit(p)`` against the prior odds of a change, ``logit(change_prior)``."""
+    llr = _logit(p)
+    prior = math.log(cfg.change_prior / (1.0 - cfg.change_prior))
+    conf = 1.0 / (1.0 + math.exp(-min(max(llr + prior, -50.0), 50.0)))
+    return Finding(kind, key, conf, log_lr=llr, prior=prior, **kw)
 
 
 def _absence(kind, key, passages, share, cfg, **kw) -> Finding:
@@ -171,8 +184,8 @@ def _arm_findings(est, mapped, amap, conf, pas, cfg) -> list:
     for e, arm in enumerate(est.arms):
         if e not in amap:
             s = _sector(arm.angle, mapped)
-            out.append(Finding('arm_added', f'arm_added:after{s}', conf[e], map_arm=s,
-                               evidence={'passages': pas[e], 'angle_deg': math.degrees(arm.angle)}))
+            out.append(_positive('arm_added', f'arm_added:after{s}', conf[e], cfg, map_arm=s,
+                                 evidence={'passages': pas[e], 'angle_deg': math.degrees(arm.angle)}))
     matched = set(amap.values())
     for m in range(len(mapped.arms)):
         if m in matched:
@@ -194,28 +207,43 @@ def _pair_lanes(est_l, map_l) -> dict[int, int]:
     return {int(i): int(j) for i, j in zip(r, c)}
 
 
-def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok) -> list:
+def _with_traffic(el) -> list:
+    """Estimated lanes a vehicle drove (``support``; all of them when the estimate carries no
+    support, e.g. raw radar input)."""
+    return [l for l in el if l.support > 0] if any(l.support > 0 for l in el) else list(el)
+
+
+def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen=None) -> list:
     out = []
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
         ml, el, ds = marm.lanes(d), lanes.get((e, d), []), DIRS[d]
         ev = {'passages': pas[e], 'lanes_estimated': int(n_est), 'lanes_mapped': len(ml)}
+        pair = _pair_lanes(el, ml)
+        if lanes_seen is not None:
+            driven = {id(l) for l in _with_traffic(el)}
+            lanes_seen.update(ml[j].id for i, j in pair.items() if id(el[i]) in driven)
         if n_est > len(ml):
-            out.append(Finding('lane_added', f'lane_added:{m}{ds}', conf[e], m, ds, [], ev))
+            out.append(_positive('lane_added', f'lane_added:{m}{ds}', conf[e], cfg, map_arm=m, direction=ds,
+                                 evidence=ev))
         elif n_est < len(ml):
-            pair = _pair_lanes(el, ml)
             gone = [ml[j].id for j in range(len(ml)) if j not in pair.values()] if pair else [l.id for l in ml[n_est:]]
-            # the arm's passages in this direction (by mapped lanes) all missed the missing lanes
+            # the arm's passages in this direction (by mapped lanes) all missed the missing lane;
+            # one finding per mapped lane (key = its id), so that drives missing *different*
+            # lanes of one arm do not add up to one lane "removed", and a drive that drove the
+            # lane refutes it (DriveView.lanes_seen)
             p_dir = pas[e] * len(ml) / max(len(marm.lanes_in) + len(marm.lanes_out), 1)
-            out.append(_absence('lane_removed', f'lane_removed:{m}{ds}', p_dir, (len(ml) - n_est) / len(ml),
-                                cfg, map_arm=m, direction=ds, map_lanes=gone, evidence=ev))
+            for g in gone:
+                out.append(_absence('lane_removed', f'lane_removed:{g}', p_dir, 1.0 / len(ml),
+                                    cfg, map_arm=m, direction=ds, map_lanes=[g], evidence=ev))
         else:
             counts_ok.add((m, ds))
             for k, (el_k, ml_k) in enumerate(zip(el, ml)):
                 dist = lane_distance(el_k.center, ml_k.center)
                 if math.isfinite(dist) and dist > cfg.moved_m:
-                    out.append(Finding('lane_moved', f'lane_moved:{ml_k.id}', conf[e], m, ds, [ml_k.id],
-                                       {'passages': pas[e], 'offset_m': dist, 'lane_index': k}))
+                    out.append(_positive('lane_moved', f'lane_moved:{ml_k.id}', conf[e], cfg, map_arm=m,
+                                         direction=ds, map_lanes=[ml_k.id],
+                                         evidence={'passages': pas[e], 'offset_m': dist, 'lane_index': k}))
     return out
 
 
@@ -235,9 +263,10 @@ def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_o
             used.add(keys[key].id)
         else:
             c = min(conf[l.arm], conf[l.arm_to])
-            out.append(Finding('connector_added', 'connector_added:%d.%d-%d.%d' % key, c, a, 'in',
-                               [mapped.arms[a].lanes_in[key[1]].id, mapped.arms[b].lanes_out[key[3]].id],
-                               {'passages': min(pas[l.arm], pas[l.arm_to]), 'turn': list(key)}))
+            out.append(_positive('connector_added', 'connector_added:%d.%d-%d.%d' % key, c, cfg, map_arm=a,
+                                 direction='in',
+                                 map_lanes=[mapped.arms[a].lanes_in[key[1]].id, mapped.arms[b].lanes_out[key[3]].id],
+                                 evidence={'passages': min(pas[l.arm], pas[l.arm_to]), 'turn': list(key)}))
     n_next: dict = {}
     for c in mapped.connectors:
         n_next[c.lane_in] = n_next.get(c.lane_in, 0) + 1
@@ -261,9 +290,9 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveV
     amap = match_arms([a.angle for a in est.arms], [a.angle for a in mapped.arms], cfg.arm_gate_deg)
     findings = _arm_findings(est, mapped, amap, conf, pas, cfg)
     lanes, by_id = _est_lanes(lanelets)
-    counts_ok, used = set(), set()
+    counts_ok, used, lanes_seen = set(), set(), set()
     for e, m in sorted(amap.items()):
-        findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok)
+        findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen)
     findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used)
     total = float(sum(pas))
     weak = sorted((f for f in findings if f.confidence < 0.5), key=lambda f: f.key)
@@ -271,4 +300,4 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveV
                                                              key=lambda f: f.key), weak=weak,
                      unobserved=sorted(f.map_arm for f in weak if f.kind == 'arm_removed'),
                      arm_conf={m: conf[e] for e, m in amap.items()}, counts_ok=counts_ok, used=used,
-                     total_conf=1.0 - math.exp(-total / 3.0), passages=total)
+                     total_conf=1.0 - math.exp(-total / 3.0), passages=total, lanes_seen=lanes_seen)

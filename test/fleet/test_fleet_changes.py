@@ -95,3 +95,20 @@ def test_bad_config_named():
         ChangeConfig(min_confidence=1.5).validate()
     with pytest.raises(ValueError, match='absence_prior'):
         ChangeConfig(absence_prior=0.0).validate()
+
+
+def test_lane_removed_is_keyed_by_the_mapped_lane(tmp_path, cases):
+    """A missing lane is one finding per *mapped lane* (key = its id), and the lanes the drive
+    drove are listed in ``lanes_seen`` (they refute the lane's absence in fusion). The old
+    key per arm direction let drives that missed *different* lanes add up to one removal."""
+    sc, r = cases[5]
+    lls, what = apply_edit(sc, 'lane_added', np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    view = compare(r.intersection, r.lanelets, X)
+    (f,) = [f for f in view.findings + view.weak if f.kind == 'lane_removed']
+    names = {l.id: l.name for a in X.arms for l in a.lanes_in + a.lanes_out}
+    assert f.key == f'lane_removed:{f.map_lanes[0]}' and names[f.map_lanes[0]].endswith('_extra')
+    arm = X.arms[f.map_arm]
+    same_dir = arm.lanes_in if f.direction == 'in' else arm.lanes_out
+    others = {l.id for l in same_dir} - set(f.map_lanes)
+    assert others and others <= view.lanes_seen and f.map_lanes[0] not in view.lanes_seen

@@ -73,3 +73,26 @@ def test_order_independent_bitwise():
         got = json.dumps([(c.key, c.confidence, c.evidence) for c in X.changes + X.candidates])
         ref = ref or got
         assert got == ref
+
+
+def _missing(lane, passages=4.0):
+    from intersection_estimator.fleet.changes import _absence
+    return _absence('lane_removed', f'lane_removed:{lane}', passages, 0.5, ChangeConfig(), map_arm=0,
+                    direction='in', map_lanes=[lane])
+
+
+def test_drives_missing_different_lanes_do_not_add_up():
+    """Short drives each miss *another* lane of one arm: the lane one drive missed, the
+    others drove (``lanes_seen``), so nothing is removed."""
+    views = []
+    for d, (gone, seen) in enumerate((('8', '9'), ('9', '8'), ('8', '9'), ('9', '8'))):
+        v = _view()
+        v.counts_ok.discard((0, 'in'))
+        v.weak = [_missing(gone)] if _missing(gone).confidence < 0.5 else []
+        v.findings = [] if v.weak else [_missing(gone)]
+        v.lanes_seen = {seen}
+        views.append((f'd{d}', v))
+    X = fuse(views)['X1']
+    assert X.changes == []
+    assert {c.key for c in X.candidates} == {'lane_removed:8', 'lane_removed:9'}
+    assert all(c.evidence['drives_contradicting'] == 2 for c in X.candidates)
