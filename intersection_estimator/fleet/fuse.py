@@ -92,7 +92,7 @@ def fuse(views: list[tuple[str, DriveView]], cfg: ChangeConfig = ChangeConfig())
         unobs = sorted(set.intersection(*(set(v.unobserved) for _, v in vs)))
         out[ident] = FusedIntersection(
             id=ident, drives=sorted({d for d, _ in vs}),
-            changes=[c for c in fused if c.confidence >= cfg.min_confidence],
-            candidates=[c for c in fused if c.confidence < cfg.min_confidence],
+            changes=[c for c in fused if c.confidence > cfg.min_confidence],
+            candidates=[c for c in fused if c.confidence <= cfg.min_confidence],
             unobserved=unobs, passages=float(sum(v.passages for _, v in vs)))
     return out
