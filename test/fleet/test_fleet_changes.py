@@ -112,3 +112,48 @@ def test_lane_removed_is_keyed_by_the_mapped_lane(tmp_path, cases):
     same_dir = arm.lanes_in if f.direction == 'in' else arm.lanes_out
     others = {l.id for l in same_dir} - set(f.map_lanes)
     assert others and others <= view.lanes_seen and f.map_lanes[0] not in view.lanes_seen
+
+
+def test_lane_evidence_is_the_vehicles_on_the_lane(tmp_path, cases):
+    """A moved lane rests on the vehicles that drove the estimated lane (1/3 nat each), not on
+    the arm's confidence: one vehicle -> log LR 1/3; a lane no vehicle drove shows nothing.
+    (The old rule gave every lane finding its arm's confidence, ~0.99 here.)"""
+    sc, r = cases[5]
+    lls, what = apply_edit(sc, 'lane_moved', np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    (f,) = compare(r.intersection, r.lanelets, X).findings
+    lanes = copy.deepcopy(r.lanelets)
+    est = None
+    for l in lanes:               # the estimated lane the finding is about: its support shows up
+        if l.kind == 'connector' or l.lane_index != f.evidence['lane_index']:
+            continue
+        keep, l.support = l.support, 1
+        v = compare(r.intersection, lanes, X)
+        if any(x.key == f.key and x.evidence['support'] == 1 for x in v.findings + v.weak):
+            est = l
+            break
+        l.support = keep
+    assert est is not None
+    est.support = 1
+    one = compare(r.intersection, lanes, X)
+    (g,) = [x for x in one.findings + one.weak if x.key == f.key]
+    assert g.log_lr == pytest.approx(1.0 / 3.0) and g.confidence == pytest.approx(1 / (1 + np.exp(-1 / 3)))
+    est.support = 0
+    none = compare(r.intersection, lanes, X)
+    assert f.key not in {x.key for x in none.findings}
+
+
+def test_absence_with_varying_shares():
+    """share_concentration k: the element's share ~ Beta(k f, k (1 - f)); k = 0 is (1 - f)^P."""
+    from math import lgamma, log
+    from intersection_estimator.fleet.changes import _absence
+    old = _absence('lane_removed', 'k', 12.0, 0.5, ChangeConfig(share_concentration=0.0))
+    assert old.log_lr == pytest.approx(-12.0 * log(0.5))
+    new = _absence('lane_removed', 'k', 12.0, 0.5, ChangeConfig(share_concentration=3.0))
+    a = b = 1.5
+    assert new.log_lr == pytest.approx(-(lgamma(b + 12) + lgamma(a + b) - lgamma(b) - lgamma(a + b + 12)))
+    assert 0 < new.log_lr < old.log_lr
+    more = _absence('lane_removed', 'k', 24.0, 0.5, ChangeConfig(share_concentration=3.0))
+    assert more.log_lr > new.log_lr
+    with pytest.raises(ValueError, match='share_concentration'):
+        ChangeConfig(share_concentration=-1.0).validate()
