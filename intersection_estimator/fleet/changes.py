@@ -117,6 +117,9 @@ class DriveView:
     weak: list = field(default_factory=list)   # findings below 0.5 in this drive (for fusion)
     lanes_seen: set = field(default_factory=set)   # mapped lane ids an estimated lane with traffic lay on
     lane_conf: dict = field(default_factory=dict)  # mapped lane id -> how well the drive saw it (logit = vehicles / 3)
+    # log LR "no such arm" of this drive's passages, none of which used an arm the map lacks
+    # (an absence, as arm_removed); None: the old rule, total_conf
+    no_new_arm_llr: float | None = None
 
     def contradiction(self, f: Finding) -> float:
         """How strongly this drive (not showing ``f``) speaks against ``f`` (0 = it cannot).
@@ -125,7 +128,10 @@ class DriveView:
         the element is direct evidence that it is there: ``P_MAX``.
         """
         if f.kind == 'arm_added':
-            return self.total_conf
+            # a drive without the arm: its passages all missed it (absence evidence, not certainty)
+            if self.no_new_arm_llr is None:
+                return self.total_conf
+            return 1.0 / (1.0 + math.exp(-min(self.no_new_arm_llr, 50.0)))
         ok = (f.map_arm, f.direction) in self.counts_ok       # the drive saw the mapped lanes
         seen = self.arm_conf.get(f.map_arm, 0.0)
         if f.kind == 'arm_removed':
@@ -351,4 +357,5 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveV
                      unobserved=sorted(f.map_arm for f in weak if f.kind == 'arm_removed'),
                      arm_conf={m: conf[e] for e, m in amap.items()}, counts_ok=counts_ok, used=used,
                      total_conf=1.0 - math.exp(-total / 3.0), passages=total, lanes_seen=lanes_seen,
-                     lane_conf=lane_conf)
+                     lane_conf=lane_conf,
+                     no_new_arm_llr=_absence('arm_added', '', total, 1.0 / (len(mapped.arms) + 1), cfg).log_lr)

@@ -157,3 +157,18 @@ def test_absence_with_varying_shares():
     assert more.log_lr > new.log_lr
     with pytest.raises(ValueError, match='share_concentration'):
         ChangeConfig(share_concentration=-1.0).validate()
+
+
+def test_added_arm_contradicted_by_absence_evidence(tmp_path, cases):
+    """A drive without an arm the map lacks speaks against it by the absence likelihood of its
+    passages (none used an extra arm, share 1 / (arms + 1)), not by its certainty of having
+    seen the intersection at all (the old rule: total_conf, ~1 for any drive)."""
+    from intersection_estimator.fleet.changes import Finding, _absence
+    sc, r = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    cfg = ChangeConfig(share_concentration=3.0)
+    view = compare(r.intersection, r.lanelets, X, cfg)
+    llr = _absence('arm_added', '', view.passages, 1.0 / (len(X.arms) + 1), cfg).log_lr
+    assert view.no_new_arm_llr == pytest.approx(llr)
+    q = view.contradiction(Finding('arm_added', 'arm_added:after0', 0.9, 0))
+    assert q == pytest.approx(1 / (1 + np.exp(-llr))) and q < view.total_conf
