@@ -10,7 +10,9 @@ kinds   per map edit (arm removed, lane added, lane removed, lane moved 1 m, con
         over those as ``recall_observable``.
 fusion  --fusion-n cases (seeds --fusion-seed..), 10 short drives each (a --share of the vehicles, own noise):
         recall / false-change rate of the fused result from the first 1, 3 and 10 drives,
-        edits cycling through the kinds; false changes also against the unchanged map.
+        edits cycling through the kinds; false changes also against the unchanged map
+        (``connector_unused`` counted apart in both, as in the kinds table; columns
+        ``*_incl_unused`` with it).
 scale   --bags simulated bags through ``fleet`` with ``--engine local --workers 1`` and
         ``--engine ray --workers 2`` side by side (small replay budget), speed-up and Ray's
         overhead per bag; skipped with --bags 0.

@@ -19,14 +19,21 @@ Change kinds say how the *world* differs from the map:
 
 Evidence is the vehicle passages each estimated arm explains: the topology estimator
 reports an arm's confidence as ``1 - exp(-passages / 3)`` (:mod:`intersection_estimator.topology`),
-so ``passages = -3 ln(1 - confidence)``. A positive finding's confidence is that posterior
-confidence of the arm(s) it rests on (log likelihood ratio ``logit(confidence)``, prior odds 1).
+so ``passages = -3 ln(1 - confidence)``. A positive finding's log likelihood ratio is
+``logit(confidence)`` of the arm(s) it rests on, for lane-level findings (lane moved / added,
+turn added) at most ``vehicles / 3`` of the vehicles that drove the estimated lane or turn
+(1/3 nat per vehicle, the unit of that rule), against the prior odds ``logit(change_prior)``
+(default 0.5: prior odds 1). A finding is claimed when its posterior is above 0.5.
 
 *Absences* (arm removed, lane removed, connector unused) rest on traffic that did not
 happen: if the element still existed and took a share ``f`` of the ``P`` passages that could
 have used it, all of them missing it has probability ``(1 - f)^P``, so the log likelihood
 ratio "gone : still there" is ``-P ln(1 - f)``, added to the prior log odds
 ``logit(absence_prior)`` (default 0.2: a mapped element is more likely there than not).
+With ``share_concentration`` k > 0 the share itself varies between elements
+(``Beta(k f, k (1 - f))``) and the likelihood is ``B(a, b + P) / B(a, b)`` (:func:`_absence`).
+A missing lane is one finding per mapped lane (key = its id); a drive whose vehicles drove
+that lane refutes it (``DriveView.lanes_seen``).
 A mapped connector is only judged when the drive's vehicles left its entering lane through
 another connector to a matched arm; its passages are the turns seen from that lane (a
 lower bound: one vehicle each). A drive claims an absence
