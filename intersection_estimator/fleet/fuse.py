@@ -9,7 +9,8 @@ log odds are added once); a drive that saw the element without the change subtra
 drive that simply took no vehicle through a new turn does not speak against it). The sum
 is the log odds of the change (naive Bayes over independent passes), so
 evidence adds up and confidence grows with every independent drive that shows it.
-A change is reported when its fused confidence is >= ``min_confidence``.
+A change is reported when its fused confidence is above ``min_confidence`` (log odds 0 =
+no evidence either way is not a change).
 
 Independent of completion order: drives are sorted by their id before anything is added,
 so the floating-point sums are the same whichever task finished first.
@@ -92,7 +93,7 @@ def fuse(views: list[tuple[str, DriveView]], cfg: ChangeConfig = ChangeConfig())
         unobs = sorted(set.intersection(*(set(v.unobserved) for _, v in vs)))
         out[ident] = FusedIntersection(
             id=ident, drives=sorted({d for d, _ in vs}),
-            changes=[c for c in fused if c.confidence >= cfg.min_confidence],
-            candidates=[c for c in fused if c.confidence < cfg.min_confidence],
+            changes=[c for c in fused if c.confidence > cfg.min_confidence],
+            candidates=[c for c in fused if c.confidence <= cfg.min_confidence],
             unobserved=unobs, passages=float(sum(v.passages for _, v in vs)))
     return out

@@ -95,3 +95,80 @@ def test_bad_config_named():
         ChangeConfig(min_confidence=1.5).validate()
     with pytest.raises(ValueError, match='absence_prior'):
         ChangeConfig(absence_prior=0.0).validate()
+
+
+def test_lane_removed_is_keyed_by_the_mapped_lane(tmp_path, cases):
+    """A missing lane is one finding per *mapped lane* (key = its id), and the lanes the drive
+    drove are listed in ``lanes_seen`` (they refute the lane's absence in fusion). The old
+    key per arm direction let drives that missed *different* lanes add up to one removal."""
+    sc, r = cases[5]
+    lls, what = apply_edit(sc, 'lane_added', np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    view = compare(r.intersection, r.lanelets, X)
+    (f,) = [f for f in view.findings + view.weak if f.kind == 'lane_removed']
+    names = {l.id: l.name for a in X.arms for l in a.lanes_in + a.lanes_out}
+    assert f.key == f'lane_removed:{f.map_lanes[0]}' and names[f.map_lanes[0]].endswith('_extra')
+    arm = X.arms[f.map_arm]
+    same_dir = arm.lanes_in if f.direction == 'in' else arm.lanes_out
+    others = {l.id for l in same_dir} - set(f.map_lanes)
+    assert others and others <= view.lanes_seen and f.map_lanes[0] not in view.lanes_seen
+
+
+def test_lane_evidence_is_the_vehicles_on_the_lane(tmp_path, cases):
+    """A moved lane rests on the vehicles that drove the estimated lane (1/3 nat each), not on
+    the arm's confidence: one vehicle -> log LR 1/3; a lane no vehicle drove shows nothing.
+    (The old rule gave every lane finding its arm's confidence, ~0.99 here.)"""
+    sc, r = cases[5]
+    lls, what = apply_edit(sc, 'lane_moved', np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    (f,) = compare(r.intersection, r.lanelets, X).findings
+    lanes = copy.deepcopy(r.lanelets)
+    est = None
+    for l in lanes:               # the estimated lane the finding is about: its support shows up
+        if l.kind == 'connector' or l.lane_index != f.evidence['lane_index']:
+            continue
+        keep, l.support = l.support, 1
+        v = compare(r.intersection, lanes, X)
+        if any(x.key == f.key and x.evidence['support'] == 1 for x in v.findings + v.weak):
+            est = l
+            break
+        l.support = keep
+    assert est is not None
+    est.support = 1
+    one = compare(r.intersection, lanes, X)
+    (g,) = [x for x in one.findings + one.weak if x.key == f.key]
+    assert g.log_lr == pytest.approx(1.0 / 3.0) and g.confidence == pytest.approx(1 / (1 + np.exp(-1 / 3)))
+    est.support = 0
+    none = compare(r.intersection, lanes, X)
+    assert f.key not in {x.key for x in none.findings}
+
+
+def test_absence_with_varying_shares():
+    """share_concentration k: the element's share ~ Beta(k f, k (1 - f)); k = 0 is (1 - f)^P."""
+    from math import lgamma, log
+    from intersection_estimator.fleet.changes import _absence
+    old = _absence('lane_removed', 'k', 12.0, 0.5, ChangeConfig(share_concentration=0.0))
+    assert old.log_lr == pytest.approx(-12.0 * log(0.5))
+    new = _absence('lane_removed', 'k', 12.0, 0.5, ChangeConfig(share_concentration=3.0))
+    a = b = 1.5
+    assert new.log_lr == pytest.approx(-(lgamma(b + 12) + lgamma(a + b) - lgamma(b) - lgamma(a + b + 12)))
+    assert 0 < new.log_lr < old.log_lr
+    more = _absence('lane_removed', 'k', 24.0, 0.5, ChangeConfig(share_concentration=3.0))
+    assert more.log_lr > new.log_lr
+    with pytest.raises(ValueError, match='share_concentration'):
+        ChangeConfig(share_concentration=-1.0).validate()
+
+
+def test_added_arm_contradicted_by_absence_evidence(tmp_path, cases):
+    """A drive without an arm the map lacks speaks against it by the absence likelihood of its
+    passages (none used an extra arm, share 1 / (arms + 1)), not by its certainty of having
+    seen the intersection at all (the old rule: total_conf, ~1 for any drive)."""
+    from intersection_estimator.fleet.changes import Finding, _absence
+    sc, r = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    cfg = ChangeConfig(share_concentration=3.0)
+    view = compare(r.intersection, r.lanelets, X, cfg)
+    llr = _absence('arm_added', '', view.passages, 1.0 / (len(X.arms) + 1), cfg).log_lr
+    assert view.no_new_arm_llr == pytest.approx(llr)
+    q = view.contradiction(Finding('arm_added', 'arm_added:after0', 0.9, 0))
+    assert q == pytest.approx(1 / (1 + np.exp(-llr))) and q < view.total_conf

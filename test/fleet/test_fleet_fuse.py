@@ -73,3 +73,48 @@ def test_order_independent_bitwise():
         got = json.dumps([(c.key, c.confidence, c.evidence) for c in X.changes + X.candidates])
         ref = ref or got
         assert got == ref
+
+
+def _missing(lane, passages=4.0):
+    from intersection_estimator.fleet.changes import _absence
+    return _absence('lane_removed', f'lane_removed:{lane}', passages, 0.5, ChangeConfig(), map_arm=0,
+                    direction='in', map_lanes=[lane])
+
+
+def test_drives_missing_different_lanes_do_not_add_up():
+    """Short drives each miss *another* lane of one arm: the lane one drive missed, the
+    others drove (``lanes_seen``), so nothing is removed."""
+    views = []
+    for d, (gone, seen) in enumerate((('8', '9'), ('9', '8'), ('8', '9'), ('9', '8'))):
+        v = _view()
+        v.counts_ok.discard((0, 'in'))
+        v.weak = [_missing(gone)] if _missing(gone).confidence < 0.5 else []
+        v.findings = [] if v.weak else [_missing(gone)]
+        v.lanes_seen = {seen}
+        views.append((f'd{d}', v))
+    X = fuse(views)['X1']
+    assert X.changes == []
+    assert {c.key for c in X.candidates} == {'lane_removed:8', 'lane_removed:9'}
+    assert all(c.evidence['drives_contradicting'] == 2 for c in X.candidates)
+
+
+def test_no_evidence_is_no_change():
+    """Fused log odds 0 (a key only weak findings without evidence carry) is not reported;
+    the old rule reported it at exactly 0.5."""
+    weak = Finding('lane_moved', 'lane_moved:7', 0.3, 0, 'in', ['7'], {'passages': 1.0}, log_lr=0.0, prior=0.0)
+    v = _view()
+    v.weak = [weak]
+    X = fuse([('a', v)])['X1']
+    assert X.changes == [] and [c.confidence for c in X.candidates] == [0.5]
+
+
+def test_lane_moved_contradicted_by_the_vehicles_that_saw_the_lane():
+    """A drive refutes a moved lane by the vehicles it saw on it (lane_conf, logit = n / 3)."""
+    import math
+    few = _view()
+    few.lane_conf = {'7': 1 / (1 + math.exp(-1 / 3))}          # one vehicle on the lane
+    many = _view()
+    many.lane_conf = {'7': 1 / (1 + math.exp(-6 / 3))}         # six
+    show = _moved(1 / (1 + math.exp(-1.0)))                    # log LR 1
+    assert fuse([('a', _view([show])), ('b', few)])['X1'].changes[0].evidence['log_odds'] == pytest.approx(1 - 1 / 3)
+    assert fuse([('a', _view([show])), ('b', many)])['X1'].changes == []
