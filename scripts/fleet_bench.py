@@ -268,8 +268,10 @@ def _fusion_table(seeds, share: float, tmp: Path) -> list[dict]:
              'false_rate_unchanged_incl_unused': v['false0_strict'] / max(v['n'], 1)} for k, v in res.items()]
 
 
-def _scale(n_bags: int, tmp: Path) -> dict:
-    """``n_bags`` drives of seed 5's intersection, local x1 vs Ray x2 in one run."""
+def _scale(n_bags: int, tmp: Path, budget: str = 'fast') -> dict:
+    """``n_bags`` drives of seed 5's intersection, local x1 vs Ray x2 in one run; ``budget``
+    'fast' (:data:`FAST`, ~0.5-3 s per bag) or 'node' (the node's default per-tick budget, as a
+    fleet would replay: ~5-10 s per bag)."""
     from intersection_estimator.bagio import write_scenario_bag
     from intersection_estimator.fleet.cli import run_fleet
     sc = simulate_scenario(5)
@@ -279,7 +281,7 @@ def _scale(n_bags: int, tmp: Path) -> dict:
     write_osm(tmp / 'map.osm', sc.gt_lanelets)
     params = tmp / 'params.yaml'
     params.write_text('intersection_estimator:\n  ros__parameters:\n'
-                      + ''.join(f'    {k}: {v}\n' for k, v in FAST.items()))
+                      + ''.join(f'    {k}: {v}\n' for k, v in (FAST if budget == 'fast' else {'seed': 0}).items()))
     wall, ok = {}, {}
     for engine, workers in (('local', 1), ('ray', 2)):
         t0 = time.perf_counter()
@@ -289,7 +291,7 @@ def _scale(n_bags: int, tmp: Path) -> dict:
         ok[engine] = sum(b['status'] == 'ok' for b in doc['bags'])
     same = (tmp / 'local' / 'changes.json').read_bytes() == (tmp / 'ray' / 'changes.json').read_bytes()
     per_bag = wall['local'] / n_bags
-    return {'bags': n_bags, 'ok_bags': ok, 'local_workers1_s': wall['local'], 'ray_workers2_s': wall['ray'],
+    return {'bags': n_bags, 'budget': budget, 'ok_bags': ok, 'local_workers1_s': wall['local'], 'ray_workers2_s': wall['ray'],
             'speedup': wall['local'] / wall['ray'], 'identical_changes_json': same,
             # Ray's cost beyond a perfect 2-way split of the local per-bag time
             'ray_overhead_per_bag_s': (wall['ray'] - wall['local'] / 2) / n_bags, 'local_per_bag_s': per_bag}
@@ -311,6 +313,8 @@ def main() -> int:
     ap.add_argument('--fusion-seed', type=int, default=1000, help='first case seed of the fusion table')
     ap.add_argument('--share', type=float, default=0.3, help='share of the vehicles one short drive sees')
     ap.add_argument('--bags', type=int, default=0, help='bags for the local-vs-Ray speed-up (0 = skip)')
+    ap.add_argument('--bag-budget', choices=('fast', 'node'), default='fast',
+                    help="replay budget of the --bags runs: 'fast' (small), 'node' (the node's defaults)")
     ap.add_argument('--set', action='append', default=[], metavar='FIELD=VALUE',
                     help='ChangeConfig field for this run (e.g. change_prior=0.05); default: the package defaults')
     ap.add_argument('--json', default=None, help='write all figures here')
@@ -347,7 +351,7 @@ def main() -> int:
             print(_md(out['fusion'], ['drives', 'cases', 'recall', 'false_rate_changed_map', 'false_rate_changed_incl_unused',
                                       'false_rate_unchanged_map', 'false_rate_unchanged_incl_unused']))
         if args.bags:
-            out['scale'] = _scale(args.bags, tmp / 'scale')
+            out['scale'] = _scale(args.bags, tmp / 'scale', args.bag_budget)
             print(json.dumps(out['scale'], indent=1))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
