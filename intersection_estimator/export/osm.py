@@ -34,6 +34,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from ..components import components
+
 __all__ = ['write_osm', 'projector', 'turn_direction', 'load_osm', 'read_origin', 'check_origin',
            'parse_origin', 'DEFAULT_ORIGIN', 'MERGE_TOL']
 
@@ -91,45 +93,33 @@ def _key(p) -> tuple:
 
 
 class _Nodes:
-    """Point keys -> one node per group: union-find over keys, position = group mean."""
+    """Point keys -> one node per group (the connected components of the merged pairs; its
+    smallest key names it), position = group mean."""
 
-    def __init__(self, lanelets):
-        self.parent: dict = {}
+    def __init__(self, lanelets, pairs=()):
         self.xy: dict = {}
         for l in lanelets:
             for b in (l.left, l.right):
                 for p in np.asarray(b, float).reshape(-1, 2):
-                    k = _key(p)
-                    self.parent.setdefault(k, k)
-                    self.xy[k] = p
-
-    def find(self, k):
-        while self.parent[k] != k:
-            self.parent[k] = self.parent[self.parent[k]]
-            k = self.parent[k]
-        return k
-
-    def union(self, a, b) -> None:
-        ra, rb = self.find(a), self.find(b)
-        if ra != rb:
-            self.parent[max(ra, rb)] = min(ra, rb)
+                    self.xy[_key(p)] = p
+        self.root = {k: g[0] for g in components(sorted(self.xy), pairs) for k in g}
 
     def positions(self) -> dict:
         """group root -> mean position of its keys."""
         acc: dict = {}
         for k, p in self.xy.items():
-            acc.setdefault(self.find(k), []).append(p)
+            acc.setdefault(self.root[k], []).append(p)
         return {r: np.mean(ps, axis=0) for r, ps in acc.items()}
 
 
-def _merge_neighbours(lanelets, nodes: _Nodes) -> int:
-    """Union the right border of each lane with the left border of its same-direction
-    neighbour when they run within :data:`MERGE_TOL` point by point; returns the pairs."""
+def _merge_pairs(lanelets) -> list[tuple]:
+    """Point-key pairs that are one node: the right border of each lane with the left border
+    of its same-direction neighbour when they run within :data:`MERGE_TOL` point by point."""
     groups: dict = {}
     for l in lanelets:
         if l.kind != 'connector':
             groups.setdefault((l.arm, l.kind), []).append(l)
-    pairs = 0
+    pairs = []
     for lanes in groups.values():
         for a in lanes:
             for b in lanes:
@@ -137,9 +127,7 @@ def _merge_neighbours(lanelets, nodes: _Nodes) -> int:
                 if a is b or len(A) != len(B) or not len(A):
                     continue
                 if float(np.max(np.hypot(*(A - B).T))) <= MERGE_TOL:
-                    for p, q in zip(A, B):
-                        nodes.union(_key(p), _key(q))
-                    pairs += 1
+                    pairs += [(_key(p), _key(q)) for p, q in zip(A, B)]
     return pairs
 
 
@@ -157,15 +145,14 @@ def _lanelet_map(lanelets):
     from lanelet2.core import Lanelet as LL
 
     ids = iter(range(1, 1 << 62))
-    nodes = _Nodes(lanelets)
-    _merge_neighbours(lanelets, nodes)
+    nodes = _Nodes(lanelets, _merge_pairs(lanelets))
     pos = nodes.positions()
     points: dict = {}
 
     def seq_of(b):
         out = []
         for p in np.asarray(b, float).reshape(-1, 2):
-            r = nodes.find(_key(p))
+            r = nodes.root[_key(p)]
             if not out or out[-1] != r:          # a merge never folds a border onto itself
                 out.append(r)
         return tuple(out)

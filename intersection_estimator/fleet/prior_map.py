@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ..components import components
 from ..model import ENTERING, LEAVING, wrap_angle
 
 __all__ = ['LaneRecord', 'MappedLane', 'MappedArm', 'MappedConnector', 'MappedIntersection',
@@ -174,30 +175,16 @@ def _with_neighbours(recs: dict, lanes: set) -> list[str]:
 
 
 def _clusters(recs: dict, connectors: list[str], preds: dict) -> list[list[str]]:
-    """Connectors grouped by shared lanes or proximity (union-find)."""
-    parent = {c: c for c in connectors}
-
-    def find(x):
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
+    """Connectors grouped by shared lanes or proximity (connected components)."""
     by_lane: dict = {}
     for c in connectors:
         for lane in preds.get(c, []) + [s for s in recs[c].successors if not recs[s].connector]:
             by_lane.setdefault(lane, []).append(c)
+    pairs = [(group[0], c) for group in by_lane.values() for c in group[1:]]
     mids = {c: recs[c].center[len(recs[c].center) // 2] for c in connectors}
-    for group in by_lane.values():
-        for c in group[1:]:
-            parent[find(c)] = find(group[0])
-    for i, a in enumerate(connectors):
-        for b in connectors[i + 1:]:
-            if np.hypot(*(mids[a] - mids[b])) < CLUSTER_M:
-                parent[find(b)] = find(a)
-    groups: dict = {}
-    for c in connectors:
-        groups.setdefault(find(c), []).append(c)
-    return sorted(groups.values(), key=lambda g: min(g))
+    pairs += [(a, b) for i, a in enumerate(connectors) for b in connectors[i + 1:]
+              if np.hypot(*(mids[a] - mids[b])) < CLUSTER_M]
+    return components(connectors, pairs)
 
 
 def _end(center: np.ndarray, direction: int):

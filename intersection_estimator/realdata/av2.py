@@ -31,6 +31,7 @@ import zlib
 
 import numpy as np
 
+from ..components import components
 from ..observations import Detections
 from ..scenarios.floor import label_points, match_segments, traffic_counts, traffic_lines
 from ..scenarios.lanegraph import Segment, gt_from_lane_graph
@@ -95,23 +96,14 @@ def av2_segments(log_map: dict) -> dict:
 def _junctions(segs: dict) -> list[set]:
     """Connector segments grouped: linked to each other or within JOIN_M."""
     ids = sorted(k for k, s in segs.items() if s.connector)
-    parent = {i: i for i in ids}
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
+    pairs = []
     for a_i, a in enumerate(ids):
         for b in ids[a_i + 1:]:
             linked = b in segs[a].succs or b in segs[a].preds
             d = np.linalg.norm(segs[a].center[:, None] - segs[b].center[None], axis=2).min()
             if linked or d <= JOIN_M:
-                parent[root(a)] = root(b)
-    groups: dict = {}
-    for i in ids:
-        groups.setdefault(root(i), set()).add(i)
-    return sorted(groups.values(), key=lambda g: sorted(g)[0])
+                pairs.append((a, b))
+    return [set(g) for g in components(ids, pairs)]
 
 
 def _read(folder):

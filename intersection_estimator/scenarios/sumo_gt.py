@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..components import components
 from .lanegraph import LaneGraphGT, Segment, gt_from_lane_graph
 
 __all__ = ['read_net', 'net_segments', 'junction_of', 'main_junction', 'net_gt', 'CLUSTER_M']
@@ -45,19 +46,12 @@ def _clusters(net) -> dict:
         nbrs.discard(node.getID())
         if len(nbrs) >= 3:
             real.add(node.getID())
-    parent = {n: n for n in real}
-
-    def root(n):
-        while parent[n] != n:
-            n = parent[n]
-        return n
+    pairs = []
     for e in net.getEdges(withInternal=False):
         a, b = e.getFromNode().getID(), e.getToNode().getID()
-        if a in real and b in real and a != b:
-            if e.getLength() < CLUSTER_M:     # node positions of hand-drawn nets mislead
-                ra, rb = sorted((root(a), root(b)))
-                parent[rb] = ra
-    return {n: root(n) for n in real}
+        if a in real and b in real and a != b and e.getLength() < CLUSTER_M:
+            pairs.append((a, b))          # node positions of hand-drawn nets mislead: by edge
+    return {n: g[0] for g in components(sorted(real), pairs) for n in g}
 
 
 def _succ_ids(lane) -> list[str]:
