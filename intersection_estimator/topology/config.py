@@ -177,11 +177,11 @@ class TopologyConfig:
     arm_count_prior: tuple = ARM_COUNT_PRIOR
     lane_count_prior: tuple = LANE_COUNT_PRIOR
     # likelihood
-    sigma_track: float = 0.5
+    sigma_track: float = 0.8
     sigma_point: float = 1.2
     sigma_angle_deg: float = 5.0
     pca_radius: float = 8.0
-    min_arm_support: float = 2.5
+    min_arm_support: float = 1.5
     clutter_floor: float = 0.01
     cut_sigma2: float = 30.0
     lane_sum: bool = False

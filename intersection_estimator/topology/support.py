@@ -4,9 +4,10 @@ The clutter floor of the likelihood lets one or two aligned trajectory parts (tu
 traffic, a false track) pay for an arm's prior. :func:`reported` drops, weakest first and
 down to ``min_arms``, the arms of the MAP state that explain fewer than
 ``min_arm_support`` vehicle passages (:func:`arm_support`: trajectory parts; radar /
-heading voxels count detections per passage, ``ObservationSet.passages``). Tracked, seeds
-0-399: every true arm explained >= 3 parts, the only two spurious arms (seeds 10, 870) 1
-and 2. An arm's confidence is ``1 - exp(-passages / 3)``.
+heading voxels count detections per passage, ``ObservationSet.passages``). The default
+1.5 keeps an arm that one vehicle entered and another left (real-junction traffic in short
+windows, docs/tuning.md) and drops a single aligned part. An arm's confidence is
+``1 - exp(-passages / 3)``.
 """
 
 from __future__ import annotations
