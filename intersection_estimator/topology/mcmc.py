@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .likelihood import ObservationSet, all_columns, arm_column, full_loglik
+from .likelihood import ObservationSet, all_columns_into, arm_column_into, full_loglik
 from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
 from .prior import log_prior
 from .state import MAXA, P_FLOOR, Chain
@@ -246,6 +246,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
     nM = np.empty(nobs)
     nAM = np.empty(nobs, np.int64)
     nLg = np.empty(nobs)
+    energy = np.empty(nobs)       # arm_column_into scratch: no allocation in the loop
     ll = observation_maxima(C, int(S[2]), wts, floor, M, AM, Lg)
     for step in range(n_steps):
         ok, lq, kind, k = propose(S, S2, P, logqn, cumqn)
@@ -258,7 +259,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
         work[W_MOVES] += 1
         work[W_VISITS] += nobs
         if kind == SHIFT:
-            all_columns(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2)
+            all_columns_into(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2, energy)
             ll2 = observation_maxima(C2, n2, wts, floor, M2, AM2, Lg2)
             work[W_ENTRIES] += n2 * nobs
             work[W_LOGS] += nobs
@@ -267,7 +268,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
             ll2 = ll + d
             work[W_LOGS] += cnt
         else:
-            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+            arm_column_into(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col, energy)
             d, cnt = rescore_arm(C, n2, k, col, True, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
             ll2 = ll + d
             work[W_ENTRIES] += nobs
