@@ -66,6 +66,7 @@ class BenchOptions:
     oracle: bool = False
     warmup: bool = True     # one small untimed estimator run per process first
     profile: bool = False   # per case: where the time went (EstimateResult.phases_ms)
+    cost_model: bool = False   # per case: the sampler's work vs its limit (topology.cost_model)
     family: str = 'table1'
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
 
@@ -199,6 +200,10 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
             'metrics': metrics, 'timing_ms': timing}
     if opts.profile and profile is not None:
         case['profile'] = profile
+        if opts.cost_model:       # after the timed run and its index repetition: untimed
+            from .topology.cost_model import case_cost
+            profile['cost_model'] = case_cost(sc.detections(opts.mode), opts.mode,
+                                              opts.samples, sc.seed)
     return case
 
 
@@ -260,6 +265,10 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     out = {'config': config, 'summary': summary, 'cases': cases}
     if opts.profile:
         out['profile'] = SI.profile_summary(cases, index and index['ref_ms'])
+    if opts.profile and opts.cost_model:
+        from .topology.cost_model import summarise
+        out['profile']['cost_model'] = summarise([c.get('profile', {}).get('cost_model')
+                                                  for c in cases])
     return out
 
 
@@ -417,7 +426,8 @@ def _cmd(args) -> int:
     opts = BenchOptions(n=args.n, mode=args.mode, samples=args.samples,
                         lane_samples=args.lane_samples, seed=args.seed, jobs=args.jobs,
                         oracle=args.oracle, warmup=not args.no_warmup,
-                        profile=getattr(args, 'profile', False), family=args.family,
+                        profile=getattr(args, 'profile', False) or getattr(args, 'cost_model', False),
+                        cost_model=getattr(args, 'cost_model', False), family=args.family,
                         empty_lanes=args.empty_lanes)
     if not opts.oracle:
         try:
@@ -438,6 +448,9 @@ def _cmd(args) -> int:
     if 'profile' in result:
         from .speed_index import format_profile
         print(format_profile(result['profile'], opts.mode))
+        if 'cost_model' in result['profile']:
+            from .topology.cost_model import format_cost
+            print(format_cost(result['profile']['cost_model']))
     if args.json:
         Path(args.json).write_text(dumps(result))
         print(f'wrote {args.json}')
@@ -470,6 +483,10 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help='score the ground truth itself (sanity: must be perfect)')
     p.add_argument('--profile', action='store_true',
                    help='per case and phase: where the time goes (table, and "profile" in --json)')
+    p.add_argument('--cost-model', action='store_true',
+                   help='with --profile: per case the sampler\'s work per sample vs the work a '
+                   'move needs, and ns per observation vs a plain compiled loop (two untimed '
+                   'replays per case; "profile.cost_model" in --json)')
     p.add_argument('--merge', nargs='+', metavar='JSON',
                    help='merge bench JSON files of one family / mode (chunks of seeds) '
                    'and print their pooled table (no cases run)')

@@ -119,3 +119,19 @@ def test_jobs_2_spawn_workers_give_the_same_cases():
     strip = [{k: v for k, v in c.items() if k != 'timing_ms'} for c in one['cases']]
     assert strip == [{k: v for k, v in c.items() if k != 'timing_ms'} for c in two['cases']]
     assert 'shared' in two['config']['timing_note']
+
+
+def test_cost_model_lands_in_the_profile_and_its_table():
+    """--cost-model: per case and pooled, the work per sample done vs needed (no timing
+    asserted)."""
+    from intersection_estimator.topology.cost_model import format_cost
+    res = run_bench(BenchOptions(n=1, mode='raw', samples=600, lane_samples=0, seed=2,
+                                 profile=True, cost_model=True))
+    case = res['cases'][0]['profile']['cost_model']
+    assert case['samples']['chain'] == 600 and case['observations'] > 0
+    pooled = res['profile']['cost_model']
+    assert pooled['cases'] == 1
+    c = pooled['chain']
+    assert 0 < c['must_entries_per_sample'] <= c['entries_per_sample']
+    assert 0 < c['must_logs_per_sample'] <= c['logs_per_sample']
+    assert 'x limit' in format_cost(pooled)

@@ -16,7 +16,7 @@ _PROBE = textwrap.dedent('''
     from intersection_estimator.topology import descent, init, mcmc, preprocess, refit, voxels
     print('sim' if 'intersection_estimator.sim' in sys.modules else 'no-sim')
     print(hasattr(__import__('intersection_estimator.topology', fromlist=['x']), 'warmup'))
-    for f in (refit.refit_arm, mcmc.run_chain, init.lane_guess, init.irls_center,
+    for f in (refit.refit_arm, refit.refit_lane_steps, mcmc.run_chain, init.lane_guess, init.irls_center,
               preprocess.split_tracks, voxels.radar_voxels, voxels.grid_voxel_index,
               lanes_mcmc.run_chain):
         print(f.__name__, len(f.signatures))
@@ -31,4 +31,4 @@ def test_warmup_compiles_every_step_without_the_simulator():
     assert out[1] == 'False'                 # one warmup: pipeline.warmup only
     counts = dict(line.split() for line in out[2:] if line)
     assert all(int(n) >= 1 for n in counts.values()), counts
-    assert int(counts['refit_arm']) == 2     # the refits and the descent's fixed-count refit
+    assert int(counts['refit_arm']) == 1     # the refits (the descent screens with refit_lane_steps)

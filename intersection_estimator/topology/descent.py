@@ -25,7 +25,7 @@ import numpy as np
 
 from .mcmc import Posterior
 from .moves import MOVE_NAMES, remove_arm_at
-from .refit import refit_gap_width
+from .refit import refit_lane_candidates
 from .state import HDR, NARMS, NIN, NOUT, STRIDE, Chain
 
 __all__ = ['DESCENT_STEPS', 'DESCENT_CHECKS', 'Descent', 'descend', 'candidates', 'run_moves']
@@ -90,16 +90,33 @@ def run_moves(S: np.ndarray, cfg, post: Posterior, rng: np.random.Generator, ref
     return ch.best_S, ch.best_lpost, ch.step
 
 
+def _lane_steps(S, k, cfg):
+    """The lane counts (entering, leaving) of arm ``k`` after each step of
+    :data:`DESCENT_STEPS` within [min_lanes, max_lanes], in that order."""
+    i = HDR + k * STRIDE
+    out = []
+    for di, do in DESCENT_STEPS:
+        ni, no = S[i + NIN] + di, S[i + NOUT] + do
+        if cfg.min_lanes <= min(ni, no) and max(ni, no) <= cfg.max_lanes:
+            out.append((int(ni), int(no)))
+    return out
+
+
 def _screened(S, L, cfg, post):
-    """The lane candidates of ``S`` worth moves (best first) and every removal."""
+    """The lane candidates of ``S`` worth moves (best first) and every removal: the
+    candidates of :func:`candidates`, the lane ones of each arm refitted in one grid pass
+    (:func:`.refit.refit_lane_candidates`, the numbers of one ``refit_gap_width`` each)."""
     lanes, removals = [], []
-    for S2, k in candidates(S, cfg, post):
-        if k < 0:
+    _, C = post.loglik(S)
+    for k in range(int(S[NARMS])):
+        steps = _lane_steps(S, k, cfg)
+        for S2, L2 in (refit_lane_candidates(post, S, k, steps, C) if steps else ()):
+            if L2 >= L - cfg.descent_screen:
+                lanes.append((L2, len(lanes), S2, k))
+        if int(S[NARMS]) > cfg.min_arms:
+            S2 = S.copy()
+            remove_arm_at(S, S2, post.t.P, post.t.logqn, k)
             removals.append(S2)
-            continue
-        S2, L2 = refit_gap_width(post, S2, k)
-        if L2 >= L - cfg.descent_screen:
-            lanes.append((L2, len(lanes), S2, k))
     lanes.sort(key=lambda x: (-x[0], x[1]))
     top = lanes[:cfg.descent_top] if cfg.descent_top > 0 else lanes
     return [(x[2], x[3]) for x in top] + [(S2, -1) for S2 in removals]

@@ -30,7 +30,7 @@ from .config import Tables, TopologyConfig
 from .descent import descend
 from .init import initial_state
 from .likelihood import ObservationSet
-from .mcmc import Posterior, acceptance_rates, temperatures
+from .mcmc import Posterior, acceptance_rates, new_work, temperatures
 from .moves import MOVE_NAMES
 from .preprocess import preprocess, radar_rows
 from .refit import refit_chain
@@ -49,8 +49,11 @@ def _as_rng(seed) -> np.random.Generator:
 class TopologyEstimator:
     """Anytime MAP estimate of the intersection topology (paper §II)."""
 
-    def __init__(self, cfg: TopologyConfig | None = None, seed=0):
+    def __init__(self, cfg: TopologyConfig | None = None, seed=0, audit: bool = False):
         self.cfg = (cfg or TopologyConfig()).validate()
+        #: count the likelihood's lower bounds in :attr:`work` too (:mod:`.cost_model`;
+        #: slower, the samples are the same)
+        self.audit = bool(audit)
         self._rng = _as_rng(seed)
         self._tables = Tables(self.cfg)
         self._pcfg = self.cfg.preprocess_config()
@@ -61,7 +64,10 @@ class TopologyEstimator:
         """Forget observations and chains."""
         self._dets = Detections.empty()
         self._radar = None                     # radar_rows(self._dets), made on first use
-        self._post = Posterior(self._tables, ObservationSet.empty())
+        #: likelihood work counters of the chains and of the descents
+        #: (:data:`.mcmc.WORK_FIELDS`), since the reset; read by :mod:`.cost_model`
+        self.work = {'chain': new_work(), 'descent': new_work()}
+        self._post = self._posterior(ObservationSet.empty())
         self._pp_center = None                 # center of the last preprocessing
         self._chains: list[Chain] = []
         self._since_data = 0                   # samples since set_observations
@@ -217,7 +223,7 @@ class TopologyEstimator:
             obs = self._preprocessed(center, arm_angles(self._best_chain().best_S))
             obs_center = center
         t = time.perf_counter()
-        self._post = Posterior(self._tables, obs)
+        self._post = self._posterior(obs)
         self._pp_center = np.asarray(obs_center, float).copy()
         self.preprocess_count += 1
         for c in self._chains:
@@ -227,6 +233,10 @@ class TopologyEstimator:
         self._ref_best = best.best_lpost
         self._last_improve = best.step
         self._timed('rescore', t)
+
+    def _posterior(self, obs: ObservationSet) -> Posterior:
+        """The posterior on ``obs``, counting its chains' work in ``work['chain']``."""
+        return Posterior(self._tables, obs, self.work['chain'], self.audit)
 
     def _preprocessed(self, center, angles) -> ObservationSet:
         t = time.perf_counter()
@@ -266,7 +276,12 @@ class TopologyEstimator:
     def _descend(self, c: Chain, deadline: float) -> int:
         """:func:`.descent.descend` from chain ``c``'s MAP state; ``c`` takes the result if
         it scores higher. Returns samples drawn."""
-        res = descend(c.best_S, self.cfg, self._post, self._rng, deadline)
+        post = self._post
+        post.work = self.work['descent']
+        try:
+            res = descend(c.best_S, self.cfg, post, self._rng, deadline)
+        finally:
+            post.work = self.work['chain']
         if res.lpost > c.best_lpost:
             c.best_S[:] = res.S
             c.best_lpost = res.lpost

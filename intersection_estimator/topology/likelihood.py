@@ -43,8 +43,8 @@ from numba import njit
 from .state import (ANG, GAP, HDR, MAXA, NIN, NOUT, P_D2_CUT, P_FLOOR, P_LANE_NORM,
                     P_LANE_SUM, P_TRAFFIC, STRIDE, WID)
 
-__all__ = ['ObservationSet', 'log_likelihood', 'arm_frame', 'arm_column', 'all_columns',
-           'combine', 'full_loglik']
+__all__ = ['ObservationSet', 'log_likelihood', 'arm_frame', 'arm_column', 'arm_column_into',
+           'all_columns', 'all_columns_into', 'combine', 'full_loglik']
 
 FIELDS = ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w', 'sigma', 'sigma_ang', 'passages')
 
@@ -165,16 +165,23 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     place of the squared angle: the circular normal, no ``acos``), divided by (number of
     lanes of that direction) ** ``P_LANE_NORM``. Lanes are rays from the
     center; behind the ray start the Euclidean distance to the start is used. With an
-    orientation the direction is arm-local (entering iff <o, u_a> < 0).
+    orientation the direction is arm-local (entering iff <o, u_a> < 0). Scratch made here
+    (:func:`arm_column_into` takes it from the caller).
     """
+    n = ox.shape[0]
+    arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, np.empty(n))
+
+
+@njit(cache=True, fastmath=True)
+def arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy):
+    """:func:`arm_column` with the caller's scratch ``energy`` (one per observation): no
+    allocation, for the sampler's loop. Two passes: the energy of the closest lane and the
+    lane-count normalisation (branch-free, vectorises); the exponential only below the cut."""
     if P[P_LANE_SUM] > 0.0:
         _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out)
         return
     cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)
     n = ox.shape[0]
-    energy = np.empty(n)
-    # pass 1, branch-free (vectorises): energy of the closest lane and the lane-count
-    # normalisation; pass 2: the exponential only below the cut
     for i in range(n):
         px = ox[i] - cx
         py = oy[i] - cy
@@ -230,8 +237,16 @@ def _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
 
 @njit(cache=True, fastmath=True)
 def all_columns(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C):
+    """Every arm's column of ``S`` into ``C`` (:func:`arm_column`)."""
+    n = ox.shape[0]
+    all_columns_into(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C, np.empty(n))
+
+
+@njit(cache=True, fastmath=True)
+def all_columns_into(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C, energy):
+    """:func:`all_columns` with the caller's scratch (:func:`arm_column_into`)."""
     for k in range(int(S[2])):
-        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C[k])
+        arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C[k], energy)
 
 
 @njit(cache=True)

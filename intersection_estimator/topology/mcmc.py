@@ -15,13 +15,28 @@ import math
 import numpy as np
 from numba import njit
 
-from .likelihood import ObservationSet, all_columns, arm_column, full_loglik
+from .likelihood import ObservationSet, all_columns_into, arm_column_into, full_loglik
 from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
 from .prior import log_prior
 from .state import MAXA, P_FLOOR, Chain
 
 __all__ = ['temperatures', 'advance', 'acceptance_rates', 'Posterior', 'run_chain',
-           'observation_maxima', 'rescore_arm']
+           'observation_maxima', 'rescore_arm', 'WORK_FIELDS', 'W_MOVES', 'W_ENTRIES',
+           'W_VISITS', 'W_LOGS', 'W_MUST_ENTRIES', 'W_MUST_LOGS', 'new_work']
+
+#: Work counters of :func:`run_chain` (int64 vector ``work``, summed over calls; the cost
+#: model of :mod:`.cost_model` reads them): likelihood evaluations (valid proposals),
+#: per-arm density entries computed, observations visited by the re-scoring, log terms
+#: recomputed; with ``audit`` also the lower bounds -- density entries that can be nonzero
+#: under the old or the new state (the rest are 0 in both: beyond the cut) and log terms
+#: whose value changes (the best density of the observation changed).
+WORK_FIELDS = ('moves', 'entries', 'visits', 'logs', 'must_entries', 'must_logs')
+W_MOVES, W_ENTRIES, W_VISITS, W_LOGS, W_MUST_ENTRIES, W_MUST_LOGS = range(6)
+
+
+def new_work() -> np.ndarray:
+    """Zeroed work counters (:data:`WORK_FIELDS`)."""
+    return np.zeros(len(WORK_FIELDS), np.int64)
 
 
 def temperatures(k0: int, n: int, t_start: float, t_end: float, anneal_samples: int) -> np.ndarray:
@@ -32,12 +47,15 @@ def temperatures(k0: int, n: int, t_start: float, t_end: float, anneal_samples: 
 
 
 def advance(chain: Chain, n: int, temps: np.ndarray, seed: int, P, logPA, logPn, arm_const,
-            logqn, cumqn, obs: ObservationSet) -> None:
+            logqn, cumqn, obs: ObservationSet, work: np.ndarray | None = None,
+            audit: bool = False) -> None:
     """Draw ``n`` samples of ``chain`` in place (one compiled call, numba RNG seeded with
-    ``seed``)."""
+    ``seed``); ``work``: counters (:data:`WORK_FIELDS`) to add to, ``audit``: count the lower
+    bounds too (no effect on the samples)."""
+    work = new_work() if work is None else work
     ll, lp, best = run_chain(chain.S, chain.C, chain.ll, chain.lp, chain.best_S,
                              chain.best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
-                             *obs.kernel_args(), n, temps, seed, chain.stats)
+                             *obs.kernel_args(), n, temps, seed, chain.stats, work, audit)
     chain.ll, chain.lp, chain.best_lpost = float(ll), float(lp), float(best)
     chain.step += n
 
@@ -52,9 +70,13 @@ class Posterior:
     """log P(I|Z) + const of packed states on one observation set (paper §II-C):
     ``tables`` is a :class:`.config.Tables`, ``obs`` an :class:`ObservationSet`."""
 
-    def __init__(self, tables, obs: ObservationSet):
+    def __init__(self, tables, obs: ObservationSet, work: np.ndarray | None = None,
+                 audit: bool = False):
         self.t = tables
         self.obs = obs
+        #: work counters of every :meth:`advance` on this posterior (:data:`WORK_FIELDS`)
+        self.work = new_work() if work is None else work
+        self.audit = audit
 
     def columns(self) -> np.ndarray:
         """Fresh (zero) per-arm likelihood columns for this observation set."""
@@ -90,7 +112,7 @@ class Posterior:
         """:func:`advance` of chain ``c`` on this posterior (``P``: the tables' by default)."""
         t = self.t
         advance(c, n, temps, seed, t.P if P is None else P, t.logPA, t.logPn, t.arm_const,
-                t.logqn, t.cumqn, self.obs)
+                t.logqn, t.cumqn, self.obs, self.work, self.audit)
 
 
 @njit(cache=True, fastmath=True)
@@ -148,9 +170,51 @@ def rescore_arm(C, n, k, col, has_col, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
     return delta, cnt
 
 
+@njit(cache=True, fastmath=True)
+def nonzero_entries(C, rows, col, has_col):
+    """Audit (:data:`W_MUST_ENTRIES`): observations with a nonzero density in any of the
+    first ``rows`` rows of ``C`` or in ``col`` (``has_col``) -- the only density entries a
+    move can change; the others are 0 before and after (beyond the cut)."""
+    cnt = 0
+    for i in range(C.shape[1]):
+        nz = has_col and col[i] > 0.0
+        for j in range(rows):
+            nz = nz or C[j, i] > 0.0
+        cnt += 1 if nz else 0
+    return cnt
+
+
+@njit(cache=True)
+def changed_maxima(M, M2, idx, cnt):
+    """Audit (:data:`W_MUST_LOGS`): of the rows ``idx[:cnt]`` (all rows if ``cnt < 0``),
+    those whose best density ``M2`` differs from ``M`` -- the log terms that must change."""
+    n = 0
+    if cnt < 0:
+        for i in range(M.shape[0]):
+            n += 1 if M2[i] != M[i] else 0
+        return n
+    for q in range(cnt):
+        n += 1 if M2[q] != M[idx[q]] else 0
+    return n
+
+
+@njit(cache=True)
+def _audit_move(work, kind, k, n, C, C2, col, M, M2, nM, idx, cnt):
+    """Audit counts of one evaluated move (see :data:`WORK_FIELDS`)."""
+    if kind == SHIFT:
+        for j in range(n):
+            work[W_MUST_ENTRIES] += nonzero_entries(C[j:j + 1], 1, C2[j], True)
+        work[W_MUST_LOGS] += changed_maxima(M, M2, idx, -1)
+        return
+    if kind != REMOVE_ARM:
+        work[W_MUST_ENTRIES] += nonzero_entries(C[k:k + 1], 1 if k < n else 0, col, True)
+    work[W_MUST_LOGS] += changed_maxima(M, nM, idx, cnt)
+
+
 @njit(cache=True, nogil=True)   # inputs are served meanwhile (node.py)
 def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
-              ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats):
+              ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats,
+              work, audit):
     """Metropolis-Hastings with simulated annealing (paper §II, Algorithm 1).
 
     Mutates ``S`` (chain state), ``C`` (per-arm density columns of ``S``) and
@@ -158,7 +222,9 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
     incremental: a move of one arm recomputes only that arm's column and re-scores only
     the observations whose best arm could change (see :func:`rescore_arm`); a center
     shift recomputes everything. ``stats[kind*2]`` counts proposals, ``stats[kind*2+1]``
-    acceptances. Returns (ll, lp, best_lpost); ``ll`` is re-summed exactly at the end.
+    acceptances; ``work`` (:data:`WORK_FIELDS`) counts the likelihood work, with ``audit``
+    also its lower bounds (:func:`_audit_move`). Returns (ll, lp, best_lpost); ``ll`` is
+    re-summed exactly at the end.
 
     Length (over 80 lines): the Metropolis-Hastings loop with its incremental bookkeeping;
     the accept branch updates six per-observation arrays in place, which a helper call per
@@ -180,6 +246,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
     nM = np.empty(nobs)
     nAM = np.empty(nobs, np.int64)
     nLg = np.empty(nobs)
+    energy = np.empty(nobs)       # arm_column_into scratch: no allocation in the loop
     ll = observation_maxima(C, int(S[2]), wts, floor, M, AM, Lg)
     for step in range(n_steps):
         ok, lq, kind, k = propose(S, S2, P, logqn, cumqn)
@@ -189,16 +256,25 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
         n2 = int(S2[2])
         n = int(S[2])
         cnt = 0
+        work[W_MOVES] += 1
+        work[W_VISITS] += nobs
         if kind == SHIFT:
-            all_columns(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2)
+            all_columns_into(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2, energy)
             ll2 = observation_maxima(C2, n2, wts, floor, M2, AM2, Lg2)
+            work[W_ENTRIES] += n2 * nobs
+            work[W_LOGS] += nobs
         elif kind == REMOVE_ARM:
             d, cnt = rescore_arm(C, n, k, col, False, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
             ll2 = ll + d
+            work[W_LOGS] += cnt
         else:
-            arm_column(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+            arm_column_into(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col, energy)
             d, cnt = rescore_arm(C, n2, k, col, True, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
             ll2 = ll + d
+            work[W_ENTRIES] += nobs
+            work[W_LOGS] += cnt
+        if audit:
+            _audit_move(work, kind, k, n, C, C2, col, M, M2, nM, idx, cnt)
         lp2 = log_prior(S2, logPA, logPn, arm_const)
         a = (ll2 + lp2 - ll - lp) / temps[step] + lq
         if a < 0.0 and math.log(np.random.random()) >= a:

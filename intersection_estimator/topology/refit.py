@@ -27,7 +27,7 @@ from .state import (ANG, GAP, HDR, NARMS, NIN, NOUT, P_D2_CUT, P_FLOOR, P_GAP_MA
                     STRIDE, WID, Chain)
 
 __all__ = ['LOG_FLOOR_INV_STEP', 'log_floor_table', 'refit_arm', 'refit_chain',
-           'refit_gap_width']
+           'refit_gap_width', 'refit_lane_steps', 'refit_lane_candidates']
 
 
 def refit_chain(post: Posterior, c: Chain, sweeps: int) -> None:
@@ -57,6 +57,29 @@ def refit_gap_width(post: Posterior, S: np.ndarray, k: int):
     return S, ll + post.log_prior(S)
 
 
+def refit_lane_candidates(post: Posterior, S: np.ndarray, k: int, counts, C=None):
+    """:func:`refit_gap_width` of ``S`` with arm ``k``'s lane counts set to each row of
+    ``counts`` (entering, leaving), in one grid pass (:func:`refit_lane_steps`); the same
+    states and log posteriors. ``C``: the columns of ``S`` if at hand. Returns a list of
+    ``(S2, log posterior)``."""
+    t = post.t
+    counts = np.asarray(counts, np.int64).reshape(-1, 2)
+    if C is None:
+        _, C = post.loglik(S)
+    args = post.obs.kernel_args()
+    out_S = np.empty((len(counts), len(S)))
+    out_col = np.empty((len(counts), len(post.obs)))
+    refit_lane_steps(S, k, counts, t.P, t.logPn, *args, C, t.gaps, t.widths, t.log_floor,
+                     out_S, out_col)
+    Ck = C.copy()
+    out = []
+    for c in range(len(counts)):
+        Ck[k] = out_col[c]      # scored as refit_gap_width scores it (the same bits)
+        ll = float(combine(Ck, int(S[NARMS]), -1, Ck[0], False, args[-1], t.P[P_FLOOR]))
+        out.append((out_S[c].copy(), ll + post.log_prior(out_S[c])))
+    return out
+
+
 #: Knots per unit of the table of F(x) = log(exp(-x) + floor) that :func:`refit_arm`
 #: interpolates (cubic Hermite: |error| < 1e-9, no exp / log in its inner loop).
 LOG_FLOOR_INV_STEP = 32.0
@@ -82,25 +105,14 @@ def log_floor_table(floor: float, xmax: float) -> np.ndarray:
 FAST_FINITE = {'nsz', 'arcp', 'contract', 'afn', 'reassoc'}
 
 
-@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
-def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths, FT,
-              fixed_counts=False):
-    """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed
-    (with ``fixed_counts``: best gap and width for the lane counts in ``S``).
-
-    Deterministic coordinate ascent on the posterior (initialisation aid, beyond the
-    paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
-    each, the lane counts per direction are chosen independently (the likelihood of
-    entering and leaving observations separates given the other arms' columns). Writes
-    the best into ``S`` and arm ``k``'s column into ``C``; returns the posterior gain,
-    never negative: the choice is scored exactly and kept only if it is no worse. The
-    search reads log-densities from ``FT`` (:func:`log_floor_table`), the closest lane
-    only; the sum over lanes (``P_LANE_SUM``) takes exact logarithms.
-
-    Length (over 80 lines): the whole grid search over (gap, width) x lane counts runs on
-    per-observation scratch arrays made once; splitting it would pass a dozen of them per
-    call, and the inner loop is the refit's hot path.
-    """
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
+def _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C):
+    """The observations arm ``k`` of ``S`` can explain at all (the other arms add a constant
+    to every candidate), packed per driving direction (side 0 entering) in
+    ``R[side, :, :nrel[side]]``: lateral offset, base energy, 1/(2 sigma^2), weight, the
+    other arms' best density o, log(o + floor), the energy cut (beyond it this arm cannot
+    beat o: the closest lane's density exp(-e) / n**beta <= exp(-e)) and -log(o).
+    Returns ``(R, nrel)``."""
     n = int(S[2])
     nobs = ox.shape[0]
     i0 = HDR + k * STRIDE
@@ -109,13 +121,8 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
     uy = math.sin(a)
     cut = P[P_D2_CUT]
     ts = P[P_TRAFFIC]
-    beta = P[P_LANE_NORM]
     lane_sum = P[P_LANE_SUM] > 0.0
     floor = P[P_FLOOR]
-    lo = int(P[P_MIN_LANES])
-    hi = int(P[P_MAX_LANES])
-    if FT.shape[0] < (cut + beta * math.log(hi)) * LOG_FLOOR_INV_STEP + 1.0:
-        raise ValueError('refit_arm: log_floor_table too short for P_D2_CUT / lanes')
     tl = np.empty(nobs)
     base = np.empty(nobs)
     dd = np.empty(nobs)
@@ -130,11 +137,6 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             if j != k and C[j, i] > m:
                 m = C[j, i]
         other[i] = m
-    # observations this arm can explain at all (others add a constant to every candidate),
-    # packed per driving direction (side 0 entering) in R[side, :, :nrel[side]]: lateral
-    # offset, base energy, 1/(2 sigma^2), weight, the other arms' best density o,
-    # log(o + floor), the energy cut (beyond it this arm cannot beat o: the closest
-    # lane's density exp(-e) / n**beta <= exp(-e)) and -log(o)
     reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX]
     R = np.empty((2, 8, nobs))
     nrel = np.zeros(2, np.int64)
@@ -154,12 +156,142 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             R[side, 6, r] = ci
             R[side, 7, r] = -math.log(other[i]) if other[i] > 0.0 else np.inf
             nrel[side] += 1
-    acc = np.empty(hi + 1)
+    return R, nrel
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
+def _side_scores(R, nrel, side, g, w, n_lo, n_hi, P, logPn, blog, invn, FT, acc):
+    """``acc[nl]`` for ``nl`` in ``[n_lo, n_hi]``: log lane prior + the log-likelihood gain
+    of one driving direction's observations (``R``, :func:`_relevant`) under arm lanes of
+    gap ``g``, width ``w`` and ``nl`` lanes, relative to "no lane of this arm explains it"
+    (the same for every candidate, so left out): 0 unless this arm beats the others.
+    Each ``acc[nl]`` is the same sum whatever the range around it."""
+    cut = P[P_D2_CUT]
+    floor = P[P_FLOOR]
+    lane_sum = P[P_LANE_SUM] > 0.0
+    for nl in range(n_lo, n_hi + 1):
+        acc[nl] = logPn[nl]
+    Rt = R[side, 0]
+    Rb = R[side, 1]
+    Ri = R[side, 2]
+    Rw = R[side, 3]
+    Ro = R[side, 4]
+    Rl = R[side, 5]
+    Rc = R[side, 6]
+    Rx = R[side, 7]
+    for r in range(nrel[side]):
+        q = Rt[r] - 0.5 * g
+        kf = math.floor(q / w)
+        if kf < 0.0:
+            kf = 0.0
+        if not lane_sum:
+            # closest lane: kf while it exists, else the outermost one, whose distance
+            # grows as lanes are taken away -- count down and stop at the first lane count
+            # that leaves it beyond the cut
+            last = -1.0
+            for nl in range(n_hi, n_lo - 1, -1):
+                kk = kf if kf < nl - 1.0 else nl - 1.0
+                if kk != last:
+                    last = kk
+                    dl = q - (kk + 0.5) * w
+                    e = Rb[r] + Ri[r] * dl * dl
+                    if e >= Rc[r]:
+                        break
+                # density exp(-x), x = e + beta log(nl): beats o iff x < -log(o); its
+                # log-density log(exp(-x) + floor) from the table
+                x = e + blog[nl]
+                if x < Rx[r]:
+                    tj = x * LOG_FLOOR_INV_STEP
+                    j = int(tj)
+                    u = tj - j
+                    f = FT[j, 0] + u * (FT[j, 1] + u * (FT[j, 2] + u * FT[j, 3]))
+                    acc[nl] += Rw[r] * (f - Rl[r])
+            continue
+        # sum over lanes 0..nl-1 (the closest must be within the cut)
+        cs = 0.0
+        for nl in range(n_lo, n_hi + 1):
+            for jl in range(0 if nl == n_lo else nl - 1, nl):   # the new lanes
+                dj = q - (jl + 0.5) * w
+                ej = Rb[r] + Ri[r] * dj * dj
+                if ej < cut:
+                    cs += math.exp(-ej)
+            kk = kf if kf < nl - 1.0 else nl - 1.0
+            dl = q - (kk + 0.5) * w
+            if Rb[r] + Ri[r] * dl * dl >= cut:
+                continue
+            v = cs * invn[nl]
+            if v > Ro[r]:
+                acc[nl] += Rw[r] * (math.log(v + floor) - Rl[r])
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _count_tables(P, FT):
+    """(1/n**beta, beta log n) for lane counts n = 1..max_lanes (index n); checks that the
+    log-floor table ``FT`` covers the energies of the search."""
+    cut = P[P_D2_CUT]
+    beta = P[P_LANE_NORM]
+    hi = int(P[P_MAX_LANES])
+    if FT.shape[0] < (cut + beta * math.log(hi)) * LOG_FLOOR_INV_STEP + 1.0:
+        raise ValueError('refit_arm: log_floor_table too short for P_D2_CUT / lanes')
     invn = np.empty(hi + 1)
     blog = np.empty(hi + 1)
     for nl in range(1, hi + 1):
         invn[nl] = float(nl) ** -beta
         blog[nl] = beta * math.log(float(nl))
+    return invn, blog
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
+def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, col,
+                    bg, bw, bi, bo):
+    """Arm ``k`` of ``S`` set to (gap ``bg``, width ``bw``, counts ``bi``, ``bo``) if that
+    scores no worse exactly (else left as it was); ``col`` its column after. Returns
+    (posterior after, posterior before, log-likelihood after) up to the other arms' prior."""
+    n = int(S[2])
+    floor = P[P_FLOOR]
+    i0 = HDR + k * STRIDE
+    old = np.empty(STRIDE)
+    for q in range(STRIDE):
+        old[q] = S[i0 + q]
+    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+    ll_cur = combine(C, n, k, col, True, wts, floor)
+    cur = ll_cur + logPn[int(old[NIN])] + logPn[int(old[NOUT])]
+    S[i0 + GAP] = bg
+    S[i0 + WID] = bw
+    S[i0 + NIN] = bi
+    S[i0 + NOUT] = bo
+    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+    ll_new = combine(C, n, k, col, True, wts, floor)
+    new = ll_new + logPn[int(bi)] + logPn[int(bo)]
+    if new < cur:
+        for q in range(STRIDE):
+            S[i0 + q] = old[q]
+        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+        return cur, cur, ll_cur
+    return new, cur, ll_new
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
+def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths, FT,
+              fixed_counts=False):
+    """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed
+    (with ``fixed_counts``: best gap and width for the lane counts in ``S``).
+
+    Deterministic coordinate ascent on the posterior (initialisation aid, beyond the
+    paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
+    each, the lane counts per direction are chosen independently (the likelihood of
+    entering and leaving observations separates given the other arms' columns,
+    :func:`_side_scores`). Writes the best into ``S`` and arm ``k``'s column into ``C``;
+    returns the posterior gain, never negative: the choice is scored exactly and kept only
+    if it is no worse. The search reads log-densities from ``FT`` (:func:`log_floor_table`),
+    the closest lane only; the sum over lanes (``P_LANE_SUM``) takes exact logarithms.
+    """
+    i0 = HDR + k * STRIDE
+    lo = int(P[P_MIN_LANES])
+    hi = int(P[P_MAX_LANES])
+    invn, blog = _count_tables(P, FT)
+    R, nrel = _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C)
+    acc = np.empty(hi + 1)
     ng = gaps.shape[0] + 1
     nw = widths.shape[0] + 1
     best = -np.inf
@@ -175,68 +307,14 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
             w = widths[wi] if wi < nw - 1 else S[i0 + WID]
             tot = 0.0
             for side in range(2):
-                sbest = -np.inf
-                sn = lo
                 n_lo = lo
                 n_hi = hi
                 if fixed_counts:
                     n_lo = int(S[i0 + NIN]) if side == 0 else int(S[i0 + NOUT])
                     n_hi = n_lo
-                for nl in range(n_lo, n_hi + 1):
-                    acc[nl] = logPn[nl]
-                Rt = R[side, 0]
-                Rb = R[side, 1]
-                Ri = R[side, 2]
-                Rw = R[side, 3]
-                Ro = R[side, 4]
-                Rl = R[side, 5]
-                Rc = R[side, 6]
-                Rx = R[side, 7]
-                for r in range(nrel[side]):
-                    # log-density relative to "no lane of this arm explains it" (the same
-                    # for every candidate, so left out): 0 unless this arm beats the others
-                    q = Rt[r] - 0.5 * g
-                    kf = math.floor(q / w)
-                    if kf < 0.0:
-                        kf = 0.0
-                    if not lane_sum:
-                        # closest lane: kf while it exists, else the outermost one, whose
-                        # distance grows as lanes are taken away -- count down and stop at
-                        # the first lane count that leaves it beyond the cut
-                        last = -1.0
-                        for nl in range(n_hi, n_lo - 1, -1):
-                            kk = kf if kf < nl - 1.0 else nl - 1.0
-                            if kk != last:
-                                last = kk
-                                dl = q - (kk + 0.5) * w
-                                e = Rb[r] + Ri[r] * dl * dl
-                                if e >= Rc[r]:
-                                    break
-                            # density exp(-x), x = e + beta log(nl): beats o iff x < -log(o);
-                            # its log-density log(exp(-x) + floor) from the table
-                            x = e + blog[nl]
-                            if x < Rx[r]:
-                                tj = x * LOG_FLOOR_INV_STEP
-                                j = int(tj)
-                                u = tj - j
-                                f = FT[j, 0] + u * (FT[j, 1] + u * (FT[j, 2] + u * FT[j, 3]))
-                                acc[nl] += Rw[r] * (f - Rl[r])
-                        continue
-                    # sum over lanes 0..nl-1 (the closest must be within the cut)
-                    cs = 0.0
-                    for nl in range(n_lo, n_hi + 1):
-                        for jl in range(0 if nl == n_lo else nl - 1, nl):   # the new lanes
-                            dj = q - (jl + 0.5) * w
-                            ej = Rb[r] + Ri[r] * dj * dj
-                            if ej < cut:
-                                cs += math.exp(-ej)
-                        kk = kf if kf < nl - 1.0 else nl - 1.0
-                        dl = q - (kk + 0.5) * w
-                        if Rb[r] + Ri[r] * dl * dl >= cut:
-                            continue
-                        v = cs * invn[nl]
-                        if v > Ro[r]:
-                            acc[nl] += Rw[r] * (math.log(v + floor) - Rl[r])
+                _side_scores(R, nrel, side, g, w, n_lo, n_hi, P, logPn, blog, invn, FT, acc)
+                sbest = -np.inf
+                sn = lo
                 for nl in range(n_lo, n_hi + 1):
                     if acc[nl] > sbest:
                         sbest = acc[nl]
@@ -252,23 +330,64 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
                 bw = w
                 bi = ni
                 bo = no
-    # posterior of the current arm parameters, for the gain
-    old = np.empty(STRIDE)
-    for q in range(STRIDE):
-        old[q] = S[i0 + q]
-    col = np.empty(nobs)
-    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
-    cur = combine(C, n, k, col, True, wts, floor) + logPn[int(old[NIN])] + logPn[int(old[NOUT])]
-    S[i0 + GAP] = bg
-    S[i0 + WID] = bw
-    S[i0 + NIN] = bi
-    S[i0 + NOUT] = bo
-    arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
-    new = combine(C, n, k, col, True, wts, floor) + logPn[int(bi)] + logPn[int(bo)]
-    if new < cur:
-        for q in range(STRIDE):
-            S[i0 + q] = old[q]
-        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
-        new = cur
+    col = np.empty(ox.shape[0])
+    new, cur, _ = _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts,
+                                  C, col, bg, bw, bi, bo)
     C[k, :] = col
     return new - cur
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
+def refit_lane_steps(S, k, counts, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C,
+                     gaps, widths, FT, out_S, out_col):
+    """:func:`refit_arm` with fixed counts for many lane counts of arm ``k`` at once: row
+    ``c`` of ``out_S`` is ``S`` with arm ``k``'s counts ``counts[c]`` (entering, leaving) and
+    its best gap and width, ``out_col[c]`` that arm's column -- the same numbers as one
+    ``refit_arm(..., fixed_counts=True)`` per row (each direction's score of a count does
+    not depend on the other counts scored with it, :func:`_side_scores`), one grid pass for
+    all. ``C``: the columns of ``S`` (arm ``k``'s is not read)."""
+    i0 = HDR + k * STRIDE
+    lo = int(P[P_MIN_LANES])
+    hi = int(P[P_MAX_LANES])
+    nc = counts.shape[0]
+    invn, blog = _count_tables(P, FT)
+    R, nrel = _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C)
+    acc = np.empty((2, hi + 1))
+    n_lo = np.empty(2, np.int64)
+    n_hi = np.empty(2, np.int64)
+    for side in range(2):
+        n_lo[side] = counts[:, side].min()
+        n_hi[side] = counts[:, side].max()
+    best = np.full(nc, -np.inf)
+    choice = np.empty((nc, 4))
+    for c in range(nc):
+        choice[c, 0] = S[i0 + GAP]
+        choice[c, 1] = S[i0 + WID]
+        choice[c, 2] = counts[c, 0]
+        choice[c, 3] = counts[c, 1]
+    ng = gaps.shape[0] + 1
+    nw = widths.shape[0] + 1
+    for gi in range(ng):
+        g = gaps[gi] if gi < ng - 1 else S[i0 + GAP]
+        for wi in range(nw):
+            w = widths[wi] if wi < nw - 1 else S[i0 + WID]
+            for side in range(2):
+                _side_scores(R, nrel, side, g, w, n_lo[side], n_hi[side], P, logPn, blog, invn,
+                             FT, acc[side])
+            for c in range(nc):
+                a0 = acc[0, counts[c, 0]]
+                a1 = acc[1, counts[c, 1]]
+                # as refit_arm: a count whose score is -inf falls back to min_lanes
+                tot = (a0 if a0 > -np.inf else -np.inf) + (a1 if a1 > -np.inf else -np.inf)
+                if tot > best[c]:
+                    best[c] = tot
+                    choice[c, 0] = g
+                    choice[c, 1] = w
+                    choice[c, 2] = counts[c, 0] if a0 > -np.inf else lo
+                    choice[c, 3] = counts[c, 1] if a1 > -np.inf else lo
+    for c in range(nc):
+        out_S[c, :] = S
+        out_S[c, i0 + NIN] = counts[c, 0]
+        out_S[c, i0 + NOUT] = counts[c, 1]
+        _keep_if_better(out_S[c], k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C,
+                        out_col[c], choice[c, 0], choice[c, 1], choice[c, 2], choice[c, 3])

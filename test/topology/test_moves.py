@@ -197,7 +197,7 @@ def test_move_frequencies_follow_algorithm_1():
     n = 20000
     run_chain(S.copy(), C, 0.0, 0.0, S.copy(), -np.inf, P, TAB.logPA, TAB.logPn, TAB.arm_const,
                 TAB.logqn, TAB.cumqn, z, z, z, z, np.zeros(0, np.bool_), z, z, z, z, n,
-                np.ones(n), 1, stats)
+                np.ones(n), 1, stats, np.zeros(6, np.int64), False)
     counts = stats[0::2] / n
     p = np.array([CFG.p_rotate, CFG.p_shift, CFG.p_gap, CFG.p_arm / 2, CFG.p_arm / 2,
                   CFG.p_lane, CFG.p_width])

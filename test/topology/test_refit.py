@@ -13,7 +13,8 @@ from intersection_estimator.topology.likelihood import full_loglik
 from intersection_estimator.topology.mcmc import Posterior
 from intersection_estimator.topology.prior import log_prior
 from intersection_estimator.topology.refit import (LOG_FLOOR_INV_STEP, log_floor_table,
-                                                   refit_arm, refit_chain, refit_gap_width)
+                                                   refit_arm, refit_chain, refit_gap_width,
+                                                   refit_lane_candidates)
 from intersection_estimator.topology.state import (GAP, HDR, MAXA, NIN, NOUT, STRIDE, WID, Chain,
                                                    pack_state)
 from reference.likelihood import log_likelihood_reference
@@ -117,3 +118,24 @@ def test_refit_gap_width_keeps_the_counts_and_scores_exactly():
     S2, lp = refit_gap_width(post, S.copy(), 0)
     assert (S2[HDR + NIN], S2[HDR + NOUT]) == (S[HDR + NIN], S[HDR + NOUT])
     assert lp == pytest.approx(post(S2), abs=1e-9) and lp >= post(S) - 1e-9
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(states(), st.integers(0, 10 ** 6), st.booleans())
+def test_lane_candidates_in_one_pass_are_refit_gap_width_bit_for_bit(S, seed, lane_sum):
+    """refit_lane_candidates (one grid pass for all lane counts of an arm, the descent's
+    screen) gives exactly the states and log posteriors of one refit_gap_width each."""
+    rng = np.random.default_rng(seed)
+    obs = random_obs(rng, 80, center=S[:2], spread=30.0)
+    cfg = TopologyConfig(lane_sum=lane_sum)
+    post = Posterior(Tables(cfg), obs)
+    k = int(rng.integers(0, int(S[2])))
+    i0 = HDR + k * STRIDE
+    counts = [(ni, no) for ni, no in itertools.product(range(cfg.min_lanes, cfg.max_lanes + 1),
+                                                       repeat=2) if rng.random() < 0.4] or [(1, 1)]
+    got = refit_lane_candidates(post, S, k, counts)
+    for (ni, no), (S2, L2) in zip(counts, got):
+        T = S.copy()
+        T[i0 + NIN], T[i0 + NOUT] = ni, no
+        T, L = refit_gap_width(post, T, k)
+        assert np.array_equal(S2, T) and L2 == L
