@@ -31,6 +31,7 @@ from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
+from numba import njit
 
 from .observations import Detections
 from .ranges import check_table
@@ -142,6 +143,24 @@ def _stamp_index(t: np.ndarray) -> np.ndarray:
     return np.unique(t, return_inverse=True)[1].ravel()
 
 
+#: largest dense square grid counted in one pass (:func:`_stamps_per_cell`); beyond it a sort
+_DENSE_CELLS = 1 << 22
+
+
+@njit(cache=True)
+def _stamps_per_cell(code, ti, n_cells):
+    """Distinct stamps per square for rows in time order (``ti`` non-decreasing): a row adds
+    one when its square last saw another stamp -- one pass, no sort."""
+    last = np.full(n_cells, -1, np.int64)
+    count = np.zeros(n_cells, np.int64)
+    for i in range(code.shape[0]):
+        c = code[i]
+        if last[c] != ti[i]:
+            last[c] = ti[i]
+            count[c] += 1
+    return count
+
+
 def _cell_evidence(xy: np.ndarray, t: np.ndarray, cfg: ObservabilityConfig) -> float:
     """Untracked rows: off-axis travel in stretches of ``min_extent_m``. The ground is cut
     into ``cell_m`` squares; a square counts when ``cell_min`` rows of as many different
@@ -151,13 +170,18 @@ def _cell_evidence(xy: np.ndarray, t: np.ndarray, cfg: ObservabilityConfig) -> f
         return 0.0
     c = np.floor(xy / cfg.cell_m).astype(np.int64)
     c -= c.min(axis=0)
-    code = c[:, 0] * (int(c[:, 1].max()) + 1) + c[:, 1]
+    ny = int(c[:, 1].max()) + 1
+    n_cells = (int(c[:, 0].max()) + 1) * ny
+    code = c[:, 0] * ny + c[:, 1]
     ti = _stamp_index(t)
-    k = int(ti.max()) + 1
-    pair = np.unique(code * k + ti)                # (square, stamp) once each, sorted
-    cell = pair // k                               # sorted too: run lengths = stamps per square
-    starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
-    per_cell = np.diff(np.r_[starts, len(cell)])
+    if n_cells <= _DENSE_CELLS and (len(ti) < 2 or (np.diff(ti) >= 0).all()):
+        per_cell = _stamps_per_cell(code, ti.astype(np.int64), n_cells)
+    else:
+        k = int(ti.max()) + 1
+        pair = np.unique(code * k + ti)            # (square, stamp) once each, sorted
+        cell = pair // k                           # sorted too: run lengths = stamps per square
+        starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+        per_cell = np.diff(np.r_[starts, len(cell)])
     return float((per_cell >= cfg.cell_min).sum()) * cfg.cell_m / max(cfg.min_extent_m, 1e-9)
 
 

@@ -12,13 +12,14 @@ _PROBE = textwrap.dedent('''
     import sys
     from intersection_estimator.pipeline import warmup
     warmup()
+    from intersection_estimator import observability
     from intersection_estimator.lanes import mcmc as lanes_mcmc
     from intersection_estimator.topology import descent, init, mcmc, preprocess, refit, voxels
     print('sim' if 'intersection_estimator.sim' in sys.modules else 'no-sim')
     print(hasattr(__import__('intersection_estimator.topology', fromlist=['x']), 'warmup'))
     for f in (refit.refit_arm, refit.refit_lane_steps, mcmc.run_chain, init.lane_guess, init.irls_center,
               preprocess.split_tracks, voxels.radar_voxels, voxels.grid_voxel_index,
-              lanes_mcmc.run_chain):
+              lanes_mcmc.run_chain, observability._stamps_per_cell):
         print(f.__name__, len(f.signatures))
 ''')
 
