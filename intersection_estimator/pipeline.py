@@ -502,7 +502,7 @@ def warmup() -> float:
 def _warmup_detections() -> Detections:
     """A four-arm crossing, right-hand traffic, one lane per direction, every turn driven:
     tracked objects, the radar detections of the same vehicles (sensor on arm 0) and
-    untracked heading rows; deterministic (seeded noise)."""
+    untracked heading rows, in time order; deterministic (seeded noise)."""
     rng = np.random.default_rng(0)
     arms = np.radians([0.0, 90.0, 180.0, 270.0])
     parts, tid = [], 0
@@ -531,4 +531,5 @@ def _warmup_detections() -> Detections:
                 Detections.make(xy[::2], t[::2], doppler=(vel * los).sum(1)[::2],
                                 sensor_xy=sensor, rcs=10.0),
                 Detections.make(xy[1::3], t[1::3], heading=h[1::3])]
-    return Detections.concat(out)
+    dets = Detections.concat(out)
+    return dets.subset(np.argsort(dets.t, kind='stable'))    # in time order, as windows are
