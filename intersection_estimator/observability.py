@@ -135,10 +135,10 @@ def _extent(xy: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     return np.where(np.isfinite(lo[:, 0]), np.linalg.norm(hi - lo, axis=1), 0.0)
 
 
-def _stamp_index(t: np.ndarray) -> np.ndarray:
+def _stamp_index(t: np.ndarray, ordered: bool) -> np.ndarray:
     """Dense index of each row's stamp (equal stamps, equal index): one pass when the rows
-    are in time order, as windows are; a sort otherwise."""
-    if len(t) > 1 and (np.diff(t) >= 0).all():
+    are in time order (``ordered``), as windows are; a sort otherwise."""
+    if ordered:
         return np.r_[0, np.cumsum(np.diff(t) > 0)]
     return np.unique(t, return_inverse=True)[1].ravel()
 
@@ -173,9 +173,10 @@ def _cell_evidence(xy: np.ndarray, t: np.ndarray, cfg: ObservabilityConfig) -> f
     ny = int(c[:, 1].max()) + 1
     n_cells = (int(c[:, 0].max()) + 1) * ny
     code = c[:, 0] * ny + c[:, 1]
-    ti = _stamp_index(t)
-    if n_cells <= _DENSE_CELLS and (len(ti) < 2 or (np.diff(ti) >= 0).all()):
-        per_cell = _stamps_per_cell(code, ti.astype(np.int64), n_cells)
+    ordered = bool((np.diff(t) >= 0).all())        # True for a single row
+    ti = _stamp_index(t, ordered)
+    if ordered and n_cells <= _DENSE_CELLS:
+        per_cell = _stamps_per_cell(code, ti, n_cells)
     else:
         k = int(ti.max()) + 1
         pair = np.unique(code * k + ti)            # (square, stamp) once each, sorted
