@@ -88,8 +88,7 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
     mode = mode or mode_of(dets)
     if mode not in ('tracked', 'raw', 'heading'):
         raise ValueError(f"mode must be 'tracked', 'raw' or 'heading', got {mode!r}")
-    if mode != 'tracked':
-        dets = replace(dets, track_id=np.full(len(dets), -1, np.int64))
+    dets = in_mode(dets, mode)
     rng_topo, rng_lanes = _seeds(seed)
     topo = TopologyEstimator(topology_config or TopologyConfig(), rng_topo)
     t0 = time.perf_counter()
@@ -110,6 +109,14 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
                           counters={'topology_preprocess': int(topo.preprocess_count),
                                     'topology_chains': int(topo.n_chains)},
                           observability=observability)
+
+
+def in_mode(dets: Detections, mode: str) -> Detections:
+    """``dets`` as :func:`estimate` reads them in ``mode``: every mode but 'tracked' ignores
+    track ids (paper §II raw-detection experiment)."""
+    if mode == 'tracked':
+        return dets
+    return replace(dets, track_id=np.full(len(dets), -1, np.int64))
 
 
 def _phases(topo, marks, lane_s: dict) -> dict:

@@ -10,7 +10,8 @@ the new state (every other entry is 0 before and after, beyond the energy cut) a
 terms whose best density changed.
 
 A plain compiled loop over the same observations, doing the same per-observation arithmetic
-without the sampler (:func:`plain_densities`, :func:`plain_logs`), prices an entry at ``a``
+without the sampler (:func:`plain_densities`: the sampler's own density kernel in a bare
+loop; :func:`plain_logs`), prices an entry at ``a``
 ns and a log term at ``b`` ns. Then, for a phase that took ``T`` with ``E`` entries and
 ``L`` log terms done and ``E*``, ``L*`` needed:
 
@@ -24,16 +25,15 @@ run and are never asserted in a test.
 
 from __future__ import annotations
 
-from dataclasses import replace
 import math
 import time
 
 import numpy as np
 from numba import njit
 
-from .likelihood import _arm_geometry
+from .likelihood import arm_column_into
 from .mcmc import WORK_FIELDS, W_ENTRIES, W_LOGS, W_MUST_ENTRIES, W_MUST_LOGS, W_VISITS
-from .state import NARMS, P_D2_CUT, P_FLOOR
+from .state import NARMS, P_FLOOR
 
 __all__ = ['plain_densities', 'plain_logs', 'plain_prices', 'case_cost', 'summarise',
            'format_cost']
@@ -41,37 +41,21 @@ __all__ = ['plain_densities', 'plain_logs', 'plain_prices', 'case_cost', 'summar
 PHASES = ('chain', 'descent')
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
 def plain_densities(S, P, ox, oy, hx, hy, has_o, dcls, isp, isa, reps):
     """``reps`` x every arm's density of every observation (the closest lane, paper eq. for
-    P(z_i|I)): the arithmetic of :func:`.likelihood.arm_column` as a plain loop at its
-    fastest -- a vectorised energy pass into one buffer made up front, then ``exp`` below
-    the cut, no bookkeeping; returns the densities' sum (so the work is not optimised away)."""
+    P(z_i|I)): the sampler's own kernel :func:`.likelihood.arm_column_into` called in a plain
+    loop, scratch made up front, no bookkeeping; returns the densities' sum (so the work is
+    not optimised away)."""
     acc = 0.0
-    cut = P[P_D2_CUT]
-    energy = np.empty(ox.shape[0])
+    n = ox.shape[0]
+    out = np.empty(n)
+    energy = np.empty(n)
     for _ in range(reps):
         for k in range(int(S[NARMS])):
-            cx, cy, ux, uy, hg, nin, nout, w, ts, inv_in, inv_out = _arm_geometry(S, k, P)
-            for i in range(ox.shape[0]):
-                px = ox[i] - cx
-                py = oy[i] - cy
-                s = px * ux + py * uy
-                t = py * ux - px * uy
-                c = hx[i] * ux + hy[i] * uy
-                side = 1.0 if t * ts > 0.0 else -1.0
-                dd = dcls[i] if dcls[i] != 0.0 else side
-                d = (1.0 if c < 0.0 else -1.0) if has_o[i] else dd
-                e = isa[i] * 2.0 * (1.0 - abs(c)) if has_o[i] else 0.0
-                nl = nin if d > 0.0 else nout
-                q = d * ts * t - hg
-                dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
-                sb = min(s, 0.0)
-                energy[i] = (e + isp[i] * (sb * sb + dl * dl)) * (1.0 if d > 0.0 else -1.0)
-            for i in range(ox.shape[0]):
-                e = abs(energy[i])
-                if e < cut:
-                    acc += (inv_in if energy[i] > 0.0 else inv_out) * math.exp(-e)
+            arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy)
+            for i in range(n):
+                acc += out[i]
     return acc
 
 
@@ -122,13 +106,11 @@ def plain_prices(post, S) -> dict:
 def _estimator(dets, mode: str, samples: int, seed: int, audit: bool):
     """The topology step of ``pipeline.estimate(dets, mode=mode, topology_samples=samples,
     seed=seed)`` (same configuration, same random stream), run with or without the audit."""
-    from ..pipeline import _seeds
+    from ..pipeline import _seeds, in_mode
     from .config import TopologyConfig
     from .estimator import TopologyEstimator
-    if mode != 'tracked':
-        dets = replace(dets, track_id=np.full(len(dets), -1, np.int64))
     est = TopologyEstimator(TopologyConfig(), _seeds(seed)[0], audit=audit)
-    est.set_observations(dets)
+    est.set_observations(in_mode(dets, mode))
     est.run(n_samples=samples)
     return est
 
