@@ -186,11 +186,9 @@ def run_case(i: int, opts: BenchOptions, estimator=None) -> dict:
         ref = SI.after_case(timing.get('wall', 0.0))   # the speed index, in this process, now
         if ref is not None:
             timing['reference'] = ref
-    if opts.lane_samples == 0:   # lane step skipped: score topology only
-        gt = {**gt, 'lanes': []}
-        if 'lanes' in est:
-            est = {**est, 'lanes': []}
-    metrics = evaluate(est, gt)
+    # lane step skipped: score the topology only, but against the truth's lane traffic
+    # (which lanes and arms were used), as a full run does
+    metrics = evaluate(est, gt, score_lanes=opts.lane_samples > 0)
     if 'error' in est:
         metrics['reason'] = f'estimator raised {est["error"]}'
         metrics['traceback'] = tb

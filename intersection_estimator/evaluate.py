@@ -312,9 +312,13 @@ def failed_case(reason: str) -> dict:
     return _failed(reason)
 
 
-def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
+def evaluate(estimate, gt, *, gate: float = GATE_M, score_lanes: bool = True) -> dict:
     """Metrics of one case; ``estimate``/``gt`` as estimate.json / gt.json dicts (or
-    ``(Intersection, lanelets)`` tuples, or a ``Scenario`` for ``gt``)."""
+    ``(Intersection, lanelets)`` tuples, or a ``Scenario`` for ``gt``).
+
+    ``score_lanes=False`` (a run without the lane course step): the lane-course metrics
+    are left out, but the truth's lanes still say which lanes and arms traffic used, so
+    ``topology_observed_correct`` asks for the same lanes as in a full run."""
     try:
         gc, ga, gl = _parse(gt, 'gt')
     except Malformed as e:
@@ -335,6 +339,8 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
     floor = _floor(gl, match)
     by_kind = _by_kind(el, gl, match, floor)
     used_in, used_out = _used_lanes(gl, len(ga))
+    if not score_lanes:
+        return {**_without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, topo)}
     return {'ok': True, 'reason': None, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
             'arm_correct': arm_correct, 'topology_correct': topo,
             'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
@@ -354,6 +360,23 @@ def evaluate(estimate, gt, *, gate: float = GATE_M) -> dict:
             'lane_precision': len(match) / len(el) if el else None,
             'connectors_matched': n_con, 'connectors_connected': ok_con,
             'connectivity_recall': ok_con / n_con if n_con else None, 'by_kind': by_kind}
+
+
+def _without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, topo) -> dict:
+    """The topology-level metrics of :func:`evaluate` with every lane-course field empty."""
+    m = _failed(None)
+    m.update({'ok': True, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
+              'arm_correct': arm_correct, 'topology_correct': topo,
+              'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
+              'arms_true_used': int(np.count_nonzero(used_in + used_out)),
+              'road_case': bool(np.count_nonzero(used_in + used_out) <= 2),
+              'intersection_reported': len(ea) >= 3,
+              'used_lanes_per_arm': [[int(a), int(b)] for a, b in zip(used_in, used_out)],
+              'center_error_m': float(np.linalg.norm(ec - gc)),
+              'angle_error_deg': float(np.degrees(dang).mean()) if len(dang) else None,
+              'arms_matched': len(dang), 'angle_error_deg_sum': float(np.degrees(dang).sum()),
+              'lanes_true': None, 'lane_recall': None})
+    return m
 
 
 def _by_kind(est_lanes, gt_lanes, match, floor) -> dict:

@@ -116,3 +116,19 @@ def test_road_case_and_intersection_reported(gt):
     s = aggregate([full, m, evaluate(gt, gt)])
     assert s['road_cases'] == 2 and s['road_no_intersection_rate'] == 0.5
     assert not evaluate(gt, gt)['road_case']
+
+
+def test_topology_only_scoring_still_asks_for_the_used_lanes(gt):
+    """``score_lanes=False`` (a bench run with ``--lane-samples 0``) leaves the lane-course
+    metrics out but keeps the truth's traffic: a used curb lane that the estimate lacks is
+    still wrong, as in a full run (the earlier bench emptied the truth's lanes, so every
+    lane looked unused and ``topology_observed`` excused any missing lane)."""
+    truth, a, _ = _undriven_curb(gt)
+    short = copy.deepcopy(gt)
+    short['arms'][a]['lanes_in'] -= 1
+    short['lanes'] = []
+    assert not evaluate(short, gt, score_lanes=False)['topology_observed_correct']
+    m = evaluate(short, truth, score_lanes=False)
+    assert m['topology_observed_correct'] and not m['topology_correct']
+    assert m['lane_recall'] is None and m['lane_error_cm'] is None
+    assert m['used_lanes_per_arm'] == evaluate(gt, truth)['used_lanes_per_arm']
