@@ -13,6 +13,8 @@ Conventions (used by simulator, estimator, evaluator, exports and the node):
   entering and ``-1`` for leaving lanes (times ``traffic_side``).
 * In the topology step (paper §II-B) every lane is a straight ray starting at the
   center ``c``; the lane-course step (paper §III) turns them into lanelets.
+  ``Arm.offset`` (beyond the paper, 0 by default) moves an arm's axis sideways along ``n``
+  (arms of real junctions do not meet in one point): its rays start at ``c + offset n``.
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ class Arm:
     lane_width: float = 3.5
     confidence: float = 1.0
     support: float = 0.0      # vehicle passages that the arm explains (beyond the paper)
+    offset: float = 0.0       # axis offset along ``normal`` [m] (beyond the paper)
 
     @property
     def direction(self) -> np.ndarray:
@@ -78,12 +81,16 @@ class Arm:
         return np.array([-math.sin(self.angle), math.cos(self.angle)])
 
     def half_width(self) -> float:
-        """Distance from the arm axis to its outermost border on the wider side."""
-        return 0.5 * self.gap + max(self.lanes_in, self.lanes_out) * self.lane_width
+        """Distance from the line through the center at ``angle`` to the arm's outermost
+        border on the wider side (the axis offset included)."""
+        return 0.5 * self.gap + max(self.lanes_in, self.lanes_out) * self.lane_width + abs(self.offset)
 
     def lane_offsets(self, direction: int, traffic_side: int = 1) -> np.ndarray:
+        """Lateral offsets of the lanes of ``direction`` from the line through the center
+        at ``angle``: :func:`lane_offset` from the arm axis, plus the axis offset."""
         n = self.lanes_in if direction == ENTERING else self.lanes_out
-        return lane_offset(self.gap, self.lane_width, np.arange(n), direction, traffic_side)
+        return self.offset + lane_offset(self.gap, self.lane_width, np.arange(n), direction,
+                                         traffic_side)
 
 
 @dataclass
@@ -110,7 +117,7 @@ class Intersection:
                 {'angle_deg': math.degrees(float(wrap_angle(a.angle))), 'gap_m': float(a.gap),
                  'lanes_in': int(a.lanes_in), 'lanes_out': int(a.lanes_out),
                  'lane_width_m': float(a.lane_width), 'confidence': float(a.confidence),
-                 'support': float(a.support)}
+                 'support': float(a.support), 'offset_m': float(a.offset)}
                 for a in self.arms
             ],
         }
@@ -120,7 +127,7 @@ class Intersection:
         arms = [Arm(angle=math.radians(a['angle_deg']), gap=a.get('gap_m', 0.0),
                     lanes_in=int(a['lanes_in']), lanes_out=int(a['lanes_out']),
                     lane_width=a.get('lane_width_m', 3.5), confidence=a.get('confidence', 1.0),
-                    support=float(a.get('support', 0.0)))
+                    support=float(a.get('support', 0.0)), offset=float(a.get('offset_m', 0.0)))
                 for a in d['arms']]
         return cls(center=np.asarray(d['center'], float), arms=arms,
                    traffic_side=int(d.get('traffic_side', 1)))

@@ -70,7 +70,7 @@ def main(argv=None) -> int:
         for name, kw in variants:
             try:
                 est = _run_estimator(partial(estimate, **kw), sc, opts)[0]
-                per[name].append(evaluate(est, gt))
+                per[name].append(evaluate(est, gt, score_lanes=a.lane_samples > 0))
             except ValueError as e:       # no intersection: counted as a failed case
                 per[name].append({'ok': False, 'reason': str(e)})
     out = {}

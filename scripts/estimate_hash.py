@@ -9,9 +9,12 @@ any estimate changes by one ulp; run-time figures (timings, stats) are left out.
     .venv/bin/python scripts/estimate_hash.py            # prints one hash per group and overall
     .venv/bin/python scripts/estimate_hash.py --check H  # exit 1 unless the overall hash is H
     .venv/bin/python scripts/estimate_hash.py --quick    # 3 seeds per mode, no replays
+    .venv/bin/python scripts/estimate_hash.py --drop-key offset_m   # hash without a new key
 
 A refactor that claims "no behaviour change" records the hash before its first commit
-and shows it unchanged after each one.
+and shows it unchanged after each one. A change that only adds an output field (e.g. a new
+key of estimate.json that is 0 by default) proves the estimates unchanged with
+``--drop-key``: the field is removed wherever it occurs before hashing.
 """
 
 from __future__ import annotations
@@ -60,6 +63,15 @@ def estimate_doc(intersection, lanelets) -> dict:
     return d
 
 
+def drop_keys(x, keys):
+    """A copy of ``x`` without the dict entries named in ``keys`` (at any depth)."""
+    if isinstance(x, dict):
+        return {k: drop_keys(v, keys) for k, v in x.items() if k not in keys}
+    if isinstance(x, (list, tuple)):
+        return [drop_keys(v, keys) for v in x]
+    return x
+
+
 def digest(docs) -> str:
     text = json.dumps(canonical(docs), sort_keys=True, separators=(',', ':'))
     return hashlib.sha256(text.encode()).hexdigest()
@@ -98,12 +110,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--check', metavar='HASH', help='exit 1 unless the overall hash equals HASH')
     ap.add_argument('--quick', action='store_true', help='3 seeds per mode and no replays')
+    ap.add_argument('--drop-key', action='append', default=[], metavar='KEY',
+                    help='leave this key out wherever it occurs (repeatable)')
     args = ap.parse_args(argv)
     import intersection_estimator
     print(f'package: {Path(intersection_estimator.__file__).parent}')
     groups = scenario_docs(range(3) if args.quick else SEEDS)
     if not args.quick:
         groups.update(replay_docs())
+    if args.drop_key:
+        groups = drop_keys(groups, set(args.drop_key))
     for name, docs in groups.items():
         print(f'{name:16s} {len(docs):3d} estimates  {digest(docs)}')
     overall = digest(groups)

@@ -17,8 +17,10 @@ import numpy as np
 
 from ..ranges import check_range
 from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
+from .arm_offset import offset_log_const
 from .refit import log_floor_table
-from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_D2_CUT,
+from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_C_WIDTH,
+                    P_D2_CUT, P_OFF_MAX, P_OFF_SIGMA, P_OFF_STEP,
                     P_FINE_P, P_FINE_SCALE, P_FLOOR, P_FOCUS, P_FOCUS_P, P_GAP_MAX,
                     P_GAP_STEP, P_LANE_NORM, P_LANE_SUM, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
                     P_MIN_LANES, P_MIN_SEP, P_ROT, P_SAMPLE_W, P_SHIFT, P_SPLIT_SPAN,
@@ -36,11 +38,14 @@ RANGES = {
     'p_lane': ('[0, 1]', 'probability of the add/remove-lane move'),
     'p_width': ('[0, 1]', 'probability of the lane-width move (beyond the paper; 0: width fixed '
                 'at lane_width)'),
+    'p_offset': ('[0, 1]', 'probability of the arm-axis offset move (beyond the paper, '
+                 'arm_offset.py; only when arm_offset_max > 0)'),
     # move ranges (Algorithm 1)
     'rotate_max_deg': ('(0, 180]', 'largest rotation of an arm [deg]'),
     'shift_max': ('(0, 100]', 'largest shift of the center [m]'),
     'gap_step': ('(0, 20]', 'largest change of a median gap [m]'),
     'width_step': ('(0, 2]', 'largest change of a lane width [m]'),
+    'offset_step': ('(0, 10]', 'largest change of an arm-axis offset [m]'),
     'fine_step_prob': ('[0, 1]', 'probability that a continuous move uses the fine range'),
     'fine_step_scale': ('(0, 1]', 'fine range as a share of the move range'),
     'split_span_deg': ('[0, 180]', "add-arm 'split': offset U[min_sep, min_sep + this] from an "
@@ -52,6 +57,9 @@ RANGES = {
     'min_lanes': ('[1, max_lanes]', 'fewest lanes per driving direction (no one-way roads)'),
     'max_lanes': ('[min_lanes, inf)', 'most lanes per driving direction'),
     'gap_max': ('(0, 30]', 'widest median gap [m]'),
+    'arm_offset_max': ('[0, 30]', 'largest sideways offset of an arm axis from the center '
+                       '(0: arms are rays from the center, paper §II-B) [m]'),
+    'arm_offset_sigma': ('(0, 30]', 'sigma of the normal prior of an arm-axis offset [m]'),
     'lane_width': ('[lane_width_min, lane_width_max]', 'lane width of a new arm, and of every '
                    'arm when p_width = 0 [m]'),
     'lane_width_min': ('[1, lane_width_max)', 'narrowest lane [m]'),
@@ -154,11 +162,13 @@ class TopologyConfig:
     p_arm: float = 0.15
     p_lane: float = 0.15
     p_width: float = 0.10
+    p_offset: float = 0.10
     # move ranges (Algorithm 1)
     rotate_max_deg: float = 6.0
     shift_max: float = 6.0
     gap_step: float = 1.8
     width_step: float = 0.25
+    offset_step: float = 1.5
     fine_step_prob: float = 0.5
     fine_step_scale: float = 0.1
     split_span_deg: float = 60.0
@@ -169,6 +179,8 @@ class TopologyConfig:
     min_lanes: int = 1
     max_lanes: int = 6
     gap_max: float = 4.0
+    arm_offset_max: float = 0.0
+    arm_offset_sigma: float = 2.0
     lane_width: float = 3.5
     lane_width_min: float = 2.75
     lane_width_max: float = 4.0
@@ -259,6 +271,11 @@ class TopologyConfig:
         return self
 
     @property
+    def offset_on(self) -> bool:
+        """Do arms carry an axis offset (:mod:`.arm_offset`)?"""
+        return self.arm_offset_max > 0 and self.p_offset > 0
+
+    @property
     def sample_width(self) -> bool:
         """Is the lane width sampled (width move on), or fixed at ``lane_width``?"""
         return self.p_width > 0
@@ -274,6 +291,8 @@ class TopologyConfig:
         p = np.array([getattr(self, n) for n in _MOVE_P])
         if continuous_only:
             p[3:5] = 0.0
+        if not self.offset_on:
+            p[6] = 0.0
         cum = np.cumsum(p / p.sum())
         P[P_MIN_SEP] = math.radians(self.min_sep_deg)
         P[P_MIN_ARMS], P[P_MAX_ARMS] = self.min_arms, self.max_arms
@@ -285,7 +304,12 @@ class TopologyConfig:
         P[P_GAP_STEP] = self.gap_step
         P[P_W_STEP] = self.width_step
         P[P_SPLIT_SPAN] = math.radians(self.split_span_deg)
-        P[[P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE]] = cum[:5]
+        P[[P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE, P_C_WIDTH]] = cum[:6]
+        if p[6] == 0.0:      # exactly 1: the offset move is never picked (cumsum may round)
+            P[P_C_WIDTH] = 1.0
+        P[P_OFF_MAX] = self.arm_offset_max if self.offset_on else 0.0
+        P[P_OFF_STEP] = self.offset_step
+        P[P_OFF_SIGMA] = self.arm_offset_sigma
         P[P_FLOOR] = self.clutter_floor
         P[P_TRAFFIC] = self.traffic_side
         P[P_D2_CUT] = self.cut_sigma2
@@ -299,7 +323,7 @@ class TopologyConfig:
         return P
 
 
-_MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width')
+_MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width', 'p_offset')
 _FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction', 'trim_longest')
 
 
@@ -357,6 +381,8 @@ class Tables:
                        if cfg.sample_width else np.zeros(0))
         self.arm_const = arm_log_const(cfg.gap_max, cfg.lane_width_min, cfg.lane_width_max,
                                        cfg.sample_width)
+        if cfg.offset_on:
+            self.arm_const += offset_log_const(cfg.arm_offset_sigma, cfg.arm_offset_max)
         self.log_floor = log_floor_table(
             cfg.clutter_floor, cfg.cut_sigma2 + cfg.lane_norm * math.log(cfg.max_lanes) + 1.0)
 

@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 
 from .state import (ANG, GAP, HDR, MAXA, NIN, NOUT, P_D2_CUT, P_FLOOR, P_LANE_NORM,
-                    P_LANE_SUM, P_TRAFFIC, STRIDE, WID)
+                    P_LANE_SUM, P_TRAFFIC, STRIDE, WID, arm_origin)
 
 __all__ = ['ObservationSet', 'log_likelihood', 'arm_frame', 'arm_column', 'arm_column_into',
            'all_columns', 'all_columns_into', 'combine', 'full_loglik']
@@ -145,13 +145,17 @@ def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa):
 
 @njit(cache=True, fastmath=True, inline='always')
 def _arm_geometry(S, k, P):
-    """Arm ``k`` of state ``S`` for the likelihood: center, unit direction, half gap, lane
-    counts and width, traffic side, lane-count normalisations (entering, leaving)."""
+    """Arm ``k`` of state ``S`` for the likelihood: axis start (the center, moved by the
+    arm's axis offset), unit direction, half gap, lane counts and width, traffic side,
+    lane-count normalisations (entering, leaving)."""
     i0 = HDR + k * STRIDE
     a = S[i0 + ANG]
     nin = S[i0 + NIN]
     nout = S[i0 + NOUT]
-    return (S[0], S[1], math.cos(a), math.sin(a), 0.5 * S[i0 + GAP], nin, nout, S[i0 + WID],
+    ux = math.cos(a)
+    uy = math.sin(a)
+    cx, cy = arm_origin(S, k, ux, uy)
+    return (cx, cy, ux, uy, 0.5 * S[i0 + GAP], nin, nout, S[i0 + WID],
             P[P_TRAFFIC], nin ** -P[P_LANE_NORM], nout ** -P[P_LANE_NORM])
 
 

@@ -17,6 +17,7 @@ from numba import njit
 
 from .likelihood import ObservationSet, all_columns_into, arm_column_into, full_loglik
 from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
+from .arm_offset import offset_log_prior
 from .prior import log_prior
 from .state import MAXA, P_FLOOR, Chain
 
@@ -91,7 +92,7 @@ class Posterior:
 
     def log_prior(self, S) -> float:
         t = self.t
-        return float(log_prior(S, t.logPA, t.logPn, t.arm_const))
+        return float(log_prior(S, t.logPA, t.logPn, t.arm_const) + offset_log_prior(S, t.P))
 
     def __call__(self, S) -> float:
         """log P(I|Z) + const of ``S`` (scored in full)."""
@@ -275,7 +276,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
             work[W_LOGS] += cnt
         if audit:
             _audit_move(work, kind, k, n, C, C2, col, M, M2, nM, idx, cnt)
-        lp2 = log_prior(S2, logPA, logPn, arm_const)
+        lp2 = log_prior(S2, logPA, logPn, arm_const) + offset_log_prior(S2, P)
         a = (ll2 + lp2 - ll - lp) / temps[step] + lq
         if a < 0.0 and math.log(np.random.random()) >= a:
             continue

@@ -28,6 +28,9 @@ lane                 uniformly: border: count +-1; median: count +-1 and gap -+ 
                      width). Add and remove of a variant are each other's reverse; ratio
                      0, or the Jacobian log(n/n') for rescale.
 width         0.09   (beyond the paper) lane width of one arm by U[-step, step]; symmetric
+offset        0      (beyond the paper, :mod:`.arm_offset`; when on) axis offset of one arm
+                     by U[-step, step], ``|offset| <= max``; symmetric. Add-arm then also
+                     draws the new arm's offset from its prior normal.
 ============  =====  ====================================================================
 
 Continuous moves use ``fine_step_scale`` x their range with probability
@@ -44,19 +47,21 @@ import math
 import numpy as np
 from numba import njit
 
-from .state import (ANG, GAP, HDR, LOG_TWO_PI, MAXA, NEG_INF, NIN, NOUT, P_C_ARM, P_C_GAP,
-                    P_C_LANE, P_C_ROT, P_C_SHIFT, P_FINE_P, P_FINE_SCALE, P_FOCUS, P_FOCUS_P,
+from .arm_offset import draw_offset, offset_logq, offset_ok
+from .state import (ANG, GAP, HDR, LOG_TWO_PI, MAXA, NEG_INF, NIN, NOUT, OFF, P_C_ARM, P_C_GAP,
+                    P_C_LANE, P_C_ROT, P_C_SHIFT, P_C_WIDTH, P_FINE_P, P_FINE_SCALE, P_FOCUS,
+                    P_FOCUS_P, P_OFF_MAX, P_OFF_STEP,
                     P_GAP_MAX, P_GAP_STEP, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS, P_MIN_LANES,
                     P_MIN_SEP, P_ROT, P_SAMPLE_W, P_SHIFT, P_SPLIT_SPAN, P_W_DEFAULT, P_W_MAX,
                     P_W_MIN, P_W_STEP, STRIDE, TWO_PI, WID, largest_gap, separation_ok, wrap)
 
 __all__ = ['MOVE_NAMES', 'ROTATE', 'SHIFT', 'CHANGE_GAP', 'ADD_ARM', 'REMOVE_ARM', 'LANE',
-           'WIDTH', 'propose', 'remove_arm_at', 'move_rotate', 'move_shift', 'move_gap',
-           'move_width', 'move_add_arm', 'move_remove_arm', 'move_lane',
+           'WIDTH', 'OFFSET', 'propose', 'remove_arm_at', 'move_rotate', 'move_shift', 'move_gap',
+           'move_width', 'move_offset', 'move_add_arm', 'move_remove_arm', 'move_lane',
            'add_arm_angle_logdensity', 'new_arm_logdensity']
 
-ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH = range(7)
-MOVE_NAMES = ('rotate', 'shift', 'gap', 'add_arm', 'remove_arm', 'lane', 'width')
+ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH, OFFSET = range(8)
+MOVE_NAMES = ('rotate', 'shift', 'gap', 'add_arm', 'remove_arm', 'lane', 'width', 'offset')
 
 
 @njit(cache=True)
@@ -108,6 +113,7 @@ def add_arm_angle_logdensity(S, phi, P):
 def new_arm_logdensity(S2, k, logqn, P):
     """log density of arm ``k``'s parameters other than its angle under add-arm."""
     lq = logqn[int(S2[HDR + k * STRIDE + NIN])] + logqn[int(S2[HDR + k * STRIDE + NOUT])]
+    lq += offset_logq(S2[HDR + k * STRIDE + OFF], P)
     lq -= math.log(P[P_GAP_MAX])
     if P[P_SAMPLE_W] > 0.0:
         lq -= math.log(P[P_W_MAX] - P[P_W_MIN])
@@ -177,6 +183,12 @@ def move_width(S, S2, P):
 
 
 @njit(cache=True)
+def move_offset(S, S2, P):
+    """Change the axis offset of an arm (beyond the paper, :mod:`.arm_offset`)."""
+    return _perturb_arm(S, S2, P, OFF, P[P_OFF_STEP], -P[P_OFF_MAX], P[P_OFF_MAX])
+
+
+@njit(cache=True)
 def move_add_arm(S, S2, P, logqn, cumqn):
     """Add an arm (largest gap or next to an arm); reverse: remove that arm."""
     n = int(S[2])
@@ -205,8 +217,9 @@ def move_add_arm(S, S2, P, logqn, cumqn):
         S2[i + WID] = P[P_W_MIN] + np.random.random() * (P[P_W_MAX] - P[P_W_MIN])
     else:
         S2[i + WID] = P[P_W_DEFAULT]
+    S2[i + OFF] = draw_offset(P)
     S2[2] = n + 1
-    if not separation_ok(S2, n, ms):
+    if not separation_ok(S2, n, ms) or not offset_ok(S2[i + OFF], P):
         return False, 0.0, n
     lq_fwd = add_arm_angle_logdensity(S, phi, P) + new_arm_logdensity(S2, n, logqn, P)
     lq_rev = -math.log(n + 1.0)
@@ -306,5 +319,8 @@ def propose(S, S2, P, logqn, cumqn):
     if w < P[P_C_LANE]:
         ok, lq, k = move_lane(S, S2, P)
         return ok, lq, LANE, k
-    ok, lq, k = move_width(S, S2, P)
-    return ok, lq, WIDTH, k
+    if w < P[P_C_WIDTH]:
+        ok, lq, k = move_width(S, S2, P)
+        return ok, lq, WIDTH, k
+    ok, lq, k = move_offset(S, S2, P)
+    return ok, lq, OFFSET, k

@@ -24,7 +24,7 @@ from .likelihood import arm_column, arm_frame, combine
 from .mcmc import Posterior
 from .state import (ANG, GAP, HDR, NARMS, NIN, NOUT, P_D2_CUT, P_FLOOR, P_GAP_MAX,
                     P_LANE_NORM, P_LANE_SUM, P_MAX_LANES, P_MIN_LANES, P_TRAFFIC, P_W_MAX,
-                    STRIDE, WID, Chain)
+                    STRIDE, WID, Chain, arm_origin)
 
 __all__ = ['LOG_FLOOR_INV_STEP', 'log_floor_table', 'refit_arm', 'refit_chain',
            'refit_gap_width', 'refit_lane_steps', 'refit_lane_candidates']
@@ -127,8 +127,9 @@ def _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C):
     base = np.empty(nobs)
     dd = np.empty(nobs)
     other = np.zeros(nobs)
+    ax, ay = arm_origin(S, k, ux, uy)
     for i in range(nobs):
-        s, t, d, e = arm_frame(i, S[0], S[1], ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
+        s, t, d, e = arm_frame(i, ax, ay, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
         dd[i] = d
         tl[i] = d * ts * t
         base[i] = e + (isp[i] * s * s if s < 0.0 else 0.0)

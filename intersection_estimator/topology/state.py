@@ -7,8 +7,13 @@ State ``S`` (float64 vector, cheap to copy; one intersection ``I = (c, A)``):
 ``S[NARMS]``                number of arms ``|A|``
 ``S[HDR + k*STRIDE + f]``   field ``f`` of arm slot ``k``: ``ANG`` angle [rad, wrapped
                             to [-pi, pi)], ``GAP`` median gap [m], ``NIN`` / ``NOUT``
-                            entering / leaving lane count, ``WID`` lane width [m]
+                            entering / leaving lane count, ``WID`` lane width [m],
+                            ``OFF`` axis offset [m] (beyond the paper, below)
 ==========================  =========================================================
+
+The axis offset (beyond the paper; :mod:`.arm_offset`) moves an arm's axis sideways,
+along its left normal ``n``: the arm's lanes are rays from ``c + OFF * n`` instead of from
+``c`` (real arms do not meet in one point). It is 0 unless the offset move is on.
 
 Slots ``>= |A|`` are unused. Arms are an unordered set; the slot order carries no meaning.
 
@@ -31,14 +36,14 @@ from numba import njit
 from ..model import Arm, Intersection, wrap_angle
 
 __all__ = ['MAXA', 'HDR', 'STRIDE', 'STATE_LEN', 'CX', 'CY', 'NARMS', 'ANG', 'GAP', 'NIN',
-           'NOUT', 'WID', 'NPARAM', 'Chain', 'pack_state', 'unpack_state', 'arm_rows',
-           'arm_angles', 'wrap', 'separation_ok', 'largest_gap']
+           'NOUT', 'WID', 'OFF', 'NPARAM', 'arm_origin', 'Chain', 'pack_state', 'unpack_state',
+           'arm_rows', 'arm_angles', 'wrap', 'separation_ok', 'largest_gap']
 
 MAXA = 8                      # arm slots
 CX, CY, NARMS = 0, 1, 2       # header slots
 HDR = 3                       # header length
-STRIDE = 5                    # values per arm slot
-ANG, GAP, NIN, NOUT, WID = 0, 1, 2, 3, 4
+STRIDE = 6                    # values per arm slot
+ANG, GAP, NIN, NOUT, WID, OFF = 0, 1, 2, 3, 4, 5
 STATE_LEN = HDR + STRIDE * MAXA
 
 # Kernel parameter slots (see the module docstring; units as in TopologyConfig).
@@ -46,8 +51,9 @@ STATE_LEN = HDR + STRIDE * MAXA
  P_ROT, P_SHIFT, P_GAP_STEP, P_W_STEP, P_SPLIT_SPAN,
  P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE,
  P_FLOOR, P_TRAFFIC, P_D2_CUT, P_SAMPLE_W, P_W_DEFAULT,
- P_LANE_NORM, P_FINE_P, P_FINE_SCALE, P_LANE_SUM, P_FOCUS, P_FOCUS_P) = range(29)
-NPARAM = 29
+ P_LANE_NORM, P_FINE_P, P_FINE_SCALE, P_LANE_SUM, P_FOCUS, P_FOCUS_P,
+ P_C_WIDTH, P_OFF_MAX, P_OFF_STEP, P_OFF_SIGMA) = range(33)
+NPARAM = 33
 
 TWO_PI = 2.0 * math.pi
 LOG_TWO_PI = math.log(TWO_PI)
@@ -64,7 +70,7 @@ def pack_state(inter: Intersection) -> np.ndarray:
     for k, a in enumerate(inter.arms):
         i = HDR + k * STRIDE
         S[i:i + STRIDE] = (float(wrap_angle(a.angle)), a.gap, a.lanes_in, a.lanes_out,
-                           a.lane_width)
+                           a.lane_width, a.offset)
     return S
 
 
@@ -75,7 +81,7 @@ def unpack_state(S: np.ndarray, traffic_side: int = 1, confidence=None) -> Inter
         i = HDR + k * STRIDE
         arms.append(Arm(angle=float(S[i + ANG]), gap=float(S[i + GAP]),
                         lanes_in=int(S[i + NIN]), lanes_out=int(S[i + NOUT]),
-                        lane_width=float(S[i + WID]),
+                        lane_width=float(S[i + WID]), offset=float(S[i + OFF]),
                         confidence=1.0 if confidence is None else float(confidence[k])))
     return Intersection(center=S[CX:CY + 1].copy(), arms=arms, traffic_side=traffic_side)
 
@@ -115,6 +121,14 @@ class Chain:
         """A chain at step 0 in state ``S`` (copied), columns zero."""
         return cls(S=S.copy(), C=np.zeros((MAXA, n_obs)), ll=ll, lp=lp, best_S=S.copy(),
                    best_lpost=best_lpost, step=0, stats=np.zeros(2 * n_moves, np.int64))
+
+
+@njit(cache=True, inline='always')
+def arm_origin(S, k, ux, uy):
+    """Start of arm ``k``'s axis, ``c + OFF * n`` with ``n = (-uy, ux)`` its left normal
+    (``(ux, uy)`` the arm's unit direction): the center when the offset is 0."""
+    off = S[HDR + k * STRIDE + OFF]
+    return S[0] - off * uy, S[1] + off * ux
 
 
 @njit(cache=True)

@@ -19,11 +19,11 @@ def log_likelihood_reference(S: np.ndarray, obs: ObservationSet, P: np.ndarray) 
     p = np.stack([obs.x - S[0], obs.y - S[1]], axis=1)
     best = np.zeros(len(obs))
     for k in range(n):
-        ang, gap, nin, nout, w = S[HDR + k * STRIDE: HDR + (k + 1) * STRIDE]
+        ang, gap, nin, nout, w, off = S[HDR + k * STRIDE: HDR + (k + 1) * STRIDE]
         u = np.array([math.cos(ang), math.sin(ang)])
         nrm = np.array([-u[1], u[0]])
         s = p @ u
-        t = p @ nrm
+        t = p @ nrm - off        # lateral position from the arm's (offset) axis
         dot = obs.hx * u[0] + obs.hy * u[1]
         d_side = np.where(t * P[P_TRAFFIC] > 0, 1.0, -1.0)    # unknown direction (d == 0)
         d = np.where(obs.has_o, np.where(dot < 0, 1.0, -1.0), np.where(obs.d == 0, d_side, obs.d))

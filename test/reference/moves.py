@@ -9,12 +9,17 @@ import numpy as np
 from numba import njit
 
 from intersection_estimator.model import wrap_angle
-from intersection_estimator.topology.moves import (ADD_ARM, CHANGE_GAP, LANE, REMOVE_ARM, ROTATE,
-                                                   SHIFT, WIDTH, move_add_arm, move_gap,
-                                                   move_lane, move_remove_arm, move_rotate,
-                                                   move_shift, move_width)
-from intersection_estimator.topology.state import (P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_GAP_MAX, P_GAP_STEP, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS, P_MIN_LANES, P_MIN_SEP, P_ROT, P_SAMPLE_W, P_SHIFT, P_SPLIT_SPAN, P_W_MAX, P_W_MIN, P_W_STEP,
-                                                   arm_rows)
+from intersection_estimator.topology.moves import (ADD_ARM, CHANGE_GAP, LANE, OFFSET, REMOVE_ARM,
+                                                   ROTATE, SHIFT, WIDTH, move_add_arm, move_gap,
+                                                   move_lane, move_offset, move_remove_arm,
+                                                   move_rotate, move_shift, move_width)
+from intersection_estimator.topology.state import (P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT,
+                                                   P_C_SHIFT, P_C_WIDTH, P_GAP_MAX, P_GAP_STEP,
+                                                   P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
+                                                   P_MIN_LANES, P_MIN_SEP, P_OFF_MAX,
+                                                   P_OFF_SIGMA, P_OFF_STEP, P_ROT, P_SAMPLE_W,
+                                                   P_SHIFT, P_SPLIT_SPAN, P_W_MAX, P_W_MIN,
+                                                   P_W_STEP, arm_rows)
 
 
 @njit(cache=False)   # test-only: not cached in the test tree
@@ -34,8 +39,10 @@ def propose_kind(S, S2, P, logqn, cumqn, kind, seed):
         ok, lq, k = move_remove_arm(S, S2, P, logqn)
     elif kind == LANE:
         ok, lq, k = move_lane(S, S2, P)
-    else:
+    elif kind == WIDTH:
         ok, lq, k = move_width(S, S2, P)
+    else:
+        ok, lq, k = move_offset(S, S2, P)
     return ok, lq, k
 
 
@@ -46,8 +53,10 @@ def is_valid(S: np.ndarray, P: np.ndarray) -> bool:
         return False
     A = arm_rows(S)
     for k in range(n):
-        ang, gap, nin, nout, w = A[k]
+        ang, gap, nin, nout, w, off = A[k]
         if not (-math.pi <= ang < math.pi) or not (0.0 <= gap <= P[P_GAP_MAX]):
+            return False
+        if abs(off) > P[P_OFF_MAX]:
             return False
         for c in (nin, nout):
             if c != int(c) or not (P[P_MIN_LANES] <= c <= P[P_MAX_LANES]):
@@ -70,9 +79,10 @@ def propose_move(S: np.ndarray, kind: int, P: np.ndarray, logqn: np.ndarray,
 
 
 def _move_prob(P: np.ndarray, kind: int) -> float:
-    cum = [0.0, P[P_C_ROT], P[P_C_SHIFT], P[P_C_GAP], P[P_C_ARM], P[P_C_LANE], 1.0]
+    cum = [0.0, P[P_C_ROT], P[P_C_SHIFT], P[P_C_GAP], P[P_C_ARM], P[P_C_LANE], P[P_C_WIDTH],
+           1.0]
     group = {ROTATE: 0, SHIFT: 1, CHANGE_GAP: 2, ADD_ARM: 3, REMOVE_ARM: 3,
-             LANE: 4, WIDTH: 5}[kind]
+             LANE: 4, WIDTH: 5, OFFSET: 6}[kind]
     p = cum[group + 1] - cum[group]
     return p * (0.5 if kind in (ADD_ARM, REMOVE_ARM) else 1.0)
 
@@ -103,7 +113,7 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
     """log q(S_to | S_from) of the full kernel restricted to move ``kind`` (reference).
 
     Continuous moves are given as densities in their own coordinates; for add/remove arm
-    the density is over (angle, gap, width) of the new arm. Used by the tests to check
+    the density is over (angle, gap, width, offset) of the new arm. Used by the tests to check
     the ratios the compiled moves return.
     """
     a, b = arm_rows(S_from), arm_rows(S_to)
@@ -118,6 +128,8 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
         return math.log(pm / n / (2 * P[P_GAP_STEP]))
     if kind == WIDTH:
         return math.log(pm / n / (2 * P[P_W_STEP]))
+    if kind == OFFSET:
+        return math.log(pm / n / (2 * P[P_OFF_STEP]))
     if kind == LANE:
         nvar = 3 if P[P_SAMPLE_W] > 0 else 2
         return math.log(pm / n / (4.0 * nvar))
@@ -127,6 +139,9 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
         lq -= math.log(P[P_GAP_MAX])
         if P[P_SAMPLE_W] > 0:
             lq -= math.log(P[P_W_MAX] - P[P_W_MIN])
+        if P[P_OFF_MAX] > 0:     # the new arm's offset, drawn from N(0, sigma)
+            sig = P[P_OFF_SIGMA]
+            lq += -0.5 * (new[5] / sig) ** 2 - math.log(sig * math.sqrt(2 * math.pi))
         return math.log(pm) + lq
     if kind == REMOVE_ARM:
         return math.log(pm / n)

@@ -14,8 +14,9 @@ CFG = TopologyConfig()
 
 
 @st.composite
-def states(draw):
-    """Valid packed states: arm angles at least min_sep apart, bounds respected."""
+def states(draw, max_offset=0.0):
+    """Valid packed states: arm angles at least min_sep apart, bounds respected; arm-axis
+    offsets in ``[-max_offset, max_offset]`` (0 unless given)."""
     ms = math.radians(CFG.min_sep_deg)
     n = draw(st.integers(CFG.min_arms, CFG.max_arms))
     slack = 2 * math.pi - n * ms
@@ -27,7 +28,8 @@ def states(draw):
                 gap=draw(st.floats(0.0, CFG.gap_max)),
                 lanes_in=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
                 lanes_out=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
-                lane_width=draw(st.floats(CFG.lane_width_min, CFG.lane_width_max)))
+                lane_width=draw(st.floats(CFG.lane_width_min, CFG.lane_width_max)),
+                offset=draw(st.floats(-max_offset, max_offset)) if max_offset > 0 else 0.0)
             for a in angles]
     c = draw(st.tuples(st.floats(-100, 100), st.floats(-100, 100)))
     S = pack_state(Intersection(center=np.asarray(c), arms=arms))

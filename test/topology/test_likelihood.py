@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from intersection_estimator.model import Arm, Intersection
@@ -11,6 +12,8 @@ from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.likelihood import (ObservationSet, all_columns, full_loglik,
                                                         log_likelihood)
 from intersection_estimator.topology.mcmc import advance, temperatures
+from intersection_estimator.topology.arm_offset import offset_log_prior
+from intersection_estimator.topology.moves import MOVE_NAMES, OFFSET
 from intersection_estimator.topology.prior import log_prior
 from intersection_estimator.topology.state import MAXA, Chain, pack_state
 from reference.likelihood import log_likelihood_reference
@@ -23,7 +26,7 @@ TAB = Tables(CFG)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(states(), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5, 1.0]),
+@given(states(4.0), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5, 1.0]),
        st.sampled_from([1, -1]))
 def test_compiled_likelihood_equals_reference(S, seed, lane_norm, side):
     rng = np.random.default_rng(seed)
@@ -32,17 +35,20 @@ def test_compiled_likelihood_equals_reference(S, seed, lane_norm, side):
     assert abs(log_likelihood(S, obs, P) - log_likelihood_reference(S, obs, P)) < 1e-9
 
 
-def test_incremental_likelihood_equals_reference_along_a_chain():
-    """After thousands of accepted moves the cached columns give the reference value."""
+@pytest.mark.parametrize('offset_max', [0.0, 6.0])
+def test_incremental_likelihood_equals_reference_along_a_chain(offset_max):
+    """After thousands of accepted moves the cached columns give the reference value (with
+    the arm-axis offset off and on)."""
+    TAB = Tables(TopologyConfig(arm_offset_max=offset_max))
     rng = np.random.default_rng(1)
     inter = easy_intersection(4, lanes=((2, 1), (1, 2), (2, 2), (1, 1)))
     obs = random_obs(rng, 150, center=inter.center, spread=50.0)
     S = pack_state(inter)
     C = np.zeros((MAXA, len(obs)))
     ll = float(full_loglik(S, TAB.P, *obs.kernel_args(), C))
-    lp = float(log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const))
+    lp = float(log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const) + offset_log_prior(S, TAB.P))
     ch = Chain(S=S, C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
-               stats=np.zeros(14, np.int64))
+               stats=np.zeros(2 * len(MOVE_NAMES), np.int64))
     for i in range(10):
         temps = temperatures(0, 500, 1e4, 1e4, 1)     # hot: many accepted moves of every kind
         advance(ch, 500, temps, 100 + i, TAB.P, TAB.logPA, TAB.logPn, TAB.arm_const,
@@ -52,9 +58,11 @@ def test_incremental_likelihood_equals_reference_along_a_chain():
         C2 = np.zeros_like(ch.C)
         all_columns(ch.S, TAB.P, *obs.kernel_args()[:8], C2)
         assert np.allclose(ch.C[:n], C2[:n], rtol=0, atol=1e-12)
-        assert abs(ch.lp - log_prior(ch.S, TAB.logPA, TAB.logPn, TAB.arm_const)) < 1e-9
+        assert abs(ch.lp - log_prior(ch.S, TAB.logPA, TAB.logPn, TAB.arm_const)
+                   - offset_log_prior(ch.S, TAB.P)) < 1e-9
     acc = ch.stats[1::2]
     assert (acc[:6] > 0).all(), acc     # every move kind was accepted at least once
+    assert (acc[OFFSET] > 0) == (offset_max > 0), acc
 
 
 def _one_obs(x, y, heading=None, d=1.0):

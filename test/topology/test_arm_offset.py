@@ -1,0 +1,134 @@
+"""Arm-axis offset (beyond the paper, topology/arm_offset.py): prior, proposal, off = the
+straight-ray model, and an offset arm recovered from its traffic."""
+
+import math
+
+import numpy as np
+import pytest
+from numba import njit
+from scipy import integrate
+
+from intersection_estimator.model import Arm, Intersection
+from intersection_estimator.topology import TopologyConfig, TopologyEstimator
+from intersection_estimator.topology.arm_offset import (draw_offset, offset_log_const,
+                                                        offset_log_prior, offset_logq)
+from intersection_estimator.topology.state import HDR, OFF, P_C_WIDTH, pack_state
+
+from .scenes import same_topology, scene
+
+ON = TopologyConfig(arm_offset_max=6.0, arm_offset_sigma=4.0)
+
+
+def _one_arm_state(o):
+    return pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=0.3, offset=o)]))
+
+
+@pytest.mark.parametrize('sigma,bound', [(2.0, 6.0), (1.0, 1.5), (4.0, 30.0)])
+def test_prior_is_a_normalised_truncated_normal(sigma, bound):
+    P = TopologyConfig(arm_offset_max=bound, arm_offset_sigma=sigma).kernel_params()
+    c = offset_log_const(sigma, bound)
+    mass, _ = integrate.quad(lambda o: math.exp(c + offset_log_prior(_one_arm_state(o), P)),
+                             -bound, bound)
+    assert mass == pytest.approx(1.0, abs=1e-9)
+
+
+def test_new_arm_draw_follows_its_density():
+    """draw_offset samples the normal whose log density offset_logq returns."""
+    P = ON.kernel_params()
+
+    @njit
+    def draws(P, n, seed):
+        np.random.seed(seed)
+        out = np.empty(n)
+        for i in range(n):
+            out[i] = draw_offset(P)
+        return out
+
+    x = draws(P, 40000, 5)
+    assert np.std(x) == pytest.approx(ON.arm_offset_sigma, rel=0.02)
+    assert abs(np.mean(x)) < 0.05
+    dens, _ = integrate.quad(lambda o: math.exp(offset_logq(o, P)), -50, 50)
+    assert dens == pytest.approx(1.0, abs=1e-9)
+
+
+def test_off_draws_nothing_and_never_picks_the_move():
+    """Off (the default): no random number is consumed, offsets stay 0, the move's
+    cumulative probability ends at the width move, the prior adds nothing."""
+    P = TopologyConfig().kernel_params()
+    assert P[P_C_WIDTH] == 1.0
+
+    @njit
+    def after_draw(P, seed):
+        np.random.seed(seed)
+        o = draw_offset(P)
+        return o, np.random.random()
+
+    @njit
+    def plain(seed):
+        np.random.seed(seed)
+        return np.random.random()
+
+    o, r = after_draw(P, 9)
+    assert o == 0.0 and r == plain(9)
+    assert offset_log_prior(_one_arm_state(0.0), P) == 0.0
+    assert offset_log_const(2.0, 0.0) == 0.0
+
+
+def _staggered(offset):
+    """A crossing whose south arm meets the box ``offset`` metres beside the north arm's
+    line (a staggered junction). Offsets are only identifiable against the center where
+    an arm has a counterpart: a T's stem could equally move the center along the road."""
+    lanes = ((1, 1), (1, 2), (1, 1), (2, 1))
+    angles = (0.0, math.pi / 2, math.pi - 0.02, -math.pi / 2)
+    arms = [Arm(angle=a, lanes_in=li, lanes_out=lo, offset=offset if k == 3 else 0.0)
+            for k, (a, (li, lo)) in enumerate(zip(angles, lanes))]
+    return Intersection(center=np.array([4.0, -2.0]), arms=arms)
+
+
+def _estimate(cfg, dets, seed=3):
+    est = TopologyEstimator(cfg, seed=seed)
+    est.set_observations(dets)
+    est.run(n_samples=6000)
+    return est.best
+
+
+def _axis_errors(gt, est, dist=30.0):
+    """Lateral distance [m] of each true arm's axis from its estimate's, ``dist`` out."""
+    out = []
+    for a in gt.arms:
+        b = min(est.arms, key=lambda b: abs(math.remainder(a.angle - b.angle, 2 * math.pi)))
+        pa = gt.center + dist * a.direction + a.offset * a.normal
+        pb = est.center + dist * b.direction + b.offset * b.normal
+        out.append(abs(float((pb - pa) @ a.normal)))
+    return np.array(out)
+
+
+@pytest.mark.parametrize('seed', [2, 5])
+def test_staggered_arms_are_followed_when_on(seed):
+    """A 5 m stagger: with the offset on every arm's axis lies within 0.5 m of its traffic,
+    the stagger carried by the offsets of the two staggered arms (north and south; the
+    likelihood is tempered, so part of it is still taken by rotating them)."""
+    gt = _staggered(5.0)
+    best = _estimate(ON, scene(gt, 'tracked', seed=seed, clutter=10))
+    assert same_topology(gt, best), best
+    assert _axis_errors(gt, best).max() < 0.5
+    north, south = (min(best.arms, key=lambda a: abs(math.remainder(a.angle - t, 2 * math.pi)))
+                    for t in (math.pi / 2, -math.pi / 2))
+    assert north.offset + south.offset > 1.0     # both move their lines towards +x
+
+
+def test_arms_through_the_center_stay_on_their_traffic():
+    """No stagger: the axes stay on the traffic and no offset grows beyond what the
+    tempered likelihood cannot tell from a center shift (well below a lane width)."""
+    gt = _staggered(0.0)
+    best = _estimate(ON, scene(gt, 'tracked', seed=4, clutter=10))
+    assert same_topology(gt, best), best
+    assert _axis_errors(gt, best).max() < 0.5
+    assert max(abs(a.offset) for a in best.arms) < 2.5
+
+
+def test_estimates_off_have_zero_offsets():
+    best = _estimate(TopologyConfig(), scene(_staggered(3.5), 'tracked', seed=2))
+    assert all(a.offset == 0.0 for a in best.arms)
+    S = pack_state(best)
+    assert np.all(S[HDR + OFF::6][:len(best.arms)] == 0.0)
