@@ -39,7 +39,7 @@ def topology_msg(types, header, intersection: Intersection | None, samples: int 
                        lanes_out=int(a.lanes_out),
                        lane_widths_in=np.full(int(a.lanes_in), float(a.lane_width)),
                        lane_widths_out=np.full(int(a.lanes_out), float(a.lane_width)),
-                       confidence=float(a.confidence))
+                       confidence=float(a.confidence), offset=float(a.offset))
                 for a in intersection.arms]
     lp = math.nan if log_posterior is None else float(log_posterior)
     return g('intersection_estimator_msgs/msg/Topology')(
@@ -71,7 +71,8 @@ def read_topology(msg) -> TopologyInfo:
         arms.append(Arm(angle=float(a.angle), gap=float(a.gap), lanes_in=int(a.lanes_in),
                         lanes_out=int(a.lanes_out),
                         lane_width=float(widths.mean()) if len(widths) else 3.5,
-                        confidence=float(a.confidence)))
+                        confidence=float(a.confidence),
+                        offset=float(getattr(a, 'offset', 0.0))))   # absent in older recordings
     inter = Intersection(center=[msg.center.x, msg.center.y], arms=arms) if arms else None
     names = {v: k for k, v in STATES.items()}
     return TopologyInfo(frame_id, stamp, inter, int(msg.samples), float(msg.log_posterior),

@@ -1,5 +1,6 @@
 """Output messages: Topology, LaneletArray, MarkerArray (rclpy and rosbags alike)."""
 
+import copy
 import math
 
 import numpy as np
@@ -32,15 +33,19 @@ def through(ts, msg):
 
 @pytest.mark.parametrize('kind,T,ts', both_namespaces())
 def test_topology_round_trip(sc, kind, T, ts):
-    msg = through(ts, topology_msg(T, make_header(T, 'map', 4.0), sc.gt, samples=5000,
+    gt = copy.deepcopy(sc.gt)
+    for k, a in enumerate(gt.arms):     # arm axis offsets travel in Arm.offset
+        a.offset = 0.75 * k - 1.0
+    msg = through(ts, topology_msg(T, make_header(T, 'map', 4.0), gt, samples=5000,
                                    log_posterior=-123.5, n_obs=800, state='CONVERGED'))
     info = read_topology(msg)
     assert (info.frame_id, info.samples, info.observations, info.state) == ('map', 5000, 800, 'CONVERGED')
     assert info.log_posterior == -123.5
     np.testing.assert_allclose(info.intersection.center, sc.gt.center)
-    for a, b in zip(info.intersection.arms, sc.gt.arms, strict=True):
+    for a, b in zip(info.intersection.arms, gt.arms, strict=True):
         assert (a.lanes_in, a.lanes_out) == (b.lanes_in, b.lanes_out)
-        assert (a.angle, a.gap, a.lane_width) == pytest.approx((b.angle, b.gap, b.lane_width))
+        assert (a.angle, a.gap, a.lane_width, a.offset) == pytest.approx(
+            (b.angle, b.gap, b.lane_width, b.offset))
     empty = read_topology(through(ts, topology_msg(T, make_header(T, 'map', 1.0), None)))
     assert empty.intersection is None and empty.state == 'NO_DATA' and math.isnan(empty.log_posterior)
 

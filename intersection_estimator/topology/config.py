@@ -106,6 +106,9 @@ RANGES = {
                      'the far end (beyond the paper; preprocess.straight_run)'),
     'track_radius': ('(min_center_dist, inf]', 'trajectory rows farther from the center do not enter '
                      'the trajectory parts (their mean point and direction, §II-A) [m]'),
+    'part_outside': ('[0, 100]', 'trajectory parts: only their rows beyond this distance from the '
+                     'center, from the far end, and it replaces min_center_dist for them (0: the '
+                     'whole part, paper §II-A; preprocess.split_tracks) [m]'),
     'min_center_dist': ('[0, 100]', 'observations closer to the center are dropped (vehicles '
                         'turn inside the box; lanes are straight rays, §II-B) [m]'),
     'arm_reach': ('[1, 100]', 'rows farther from every arm axis are voxelised along rays '
@@ -219,6 +222,7 @@ class TopologyConfig:
     min_track_speed: float = 3.0
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0
+    part_outside: float = 12.0
     max_center_dist: float = math.inf
     track_radius: float = 75.0
     trim_longest: bool = True
@@ -340,7 +344,7 @@ PREPROCESS_FIELDS = (
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
     'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
-    'track_radius', 'trim_longest', 'arm_reach')
+    'track_radius', 'trim_longest', 'arm_reach', 'part_outside')
 
 
 def _preprocess_validate(self) -> 'PreprocessConfig':

@@ -79,7 +79,7 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
                 hd[a:b] = _path_heading(xy[a:b])
     o = split_tracks(xy[:, 0].copy(), xy[:, 1].copy(), hd, starts, ends, float(c[0]), float(c[1]),
                      cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5,
-                     bool(cfg.trim_longest))
+                     bool(cfg.trim_longest), float(cfg.part_outside))
     if len(o) == 0:
         return ObservationSet.empty()
     hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
@@ -87,6 +87,8 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
                          np.full(len(o), cfg.sigma_track),
                          np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
+    if cfg.part_outside > 0:     # parts cut at that radius: it is also their box radius
+        return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.part_outside)
     return _drop_near_center(obs, c, cfg, far=False)
 
 
@@ -327,9 +329,34 @@ def straight_run(h, first, step, n, tol, win, longest):
 
 
 @njit(cache=True)
-def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, longest):
+def _far_portion(x, y, lo, hi, cx, cy, r2, entering):
+    """The rows ``[lo, hi)`` of a trajectory part that lie on its far side of the circle of
+    squared radius ``r2`` around the center: the contiguous run from the far end (the
+    start of an entering part, the end of a leaving one) up to the first row inside."""
+    if r2 <= 0.0:
+        return lo, hi
+    if entering:
+        for i in range(lo, hi):
+            if (x[i] - cx) ** 2 + (y[i] - cy) ** 2 < r2:
+                return lo, i
+        return lo, hi
+    for i in range(hi - 1, lo - 1, -1):
+        if (x[i] - cx) ** 2 + (y[i] - cy) ** 2 < r2:
+            return i + 1, hi
+    return lo, hi
+
+
+@njit(cache=True)
+def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, longest,
+                 outside=0.0):
     """Paper §II-A for tracked objects: split each trajectory at its point closest to the
     center ``(cx, cy)`` and reduce each part to its mean point and mean direction.
+
+    With ``outside > 0`` (beyond the paper) a part is first cut to its rows beyond that
+    distance from the center, counted from its far end (:func:`_far_portion`): a vehicle
+    seen only over the last tens of metres before the box (a short recording, a near
+    neighbouring junction, a limited view) still gives its approach, instead of a mean
+    point inside the box radius that is then dropped as a vehicle in the box.
 
     Rows are sorted by (track, time); ``h`` is the heading per row. With ``tol > 0`` a part
     is first cut to its straight run from the far end (moving average of ``win`` heading
@@ -357,6 +384,7 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, long
         for part in range(2):
             lo = a if part == 0 else imin
             hi = imin + 1 if part == 0 else b
+            lo, hi = _far_portion(x, y, lo, hi, cx, cy, outside * outside, part == 0)
             n = hi - lo
             if n < min_pts:
                 continue

@@ -17,8 +17,9 @@ from intersection_estimator.topology import PreprocessConfig
 
 #: The preprocessing settings these tests were written for (before PreprocessConfig was
 #: derived from TopologyConfig, its defaults): 2 m square voxels, unscaled weights, no
-#: near-center drop.
-LEGACY_PREPROCESS = PreprocessConfig(voxel_size=2.0, weight_scale=1.0, min_center_dist=0.0)
+#: near-center drop, whole trajectory parts.
+LEGACY_PREPROCESS = PreprocessConfig(voxel_size=2.0, weight_scale=1.0, min_center_dist=0.0,
+                                     part_outside=0.0)
 
 
 def easy_intersection(n_arms: int = 4, lanes=((1, 1),) * 4, center=(5.0, -3.0),

@@ -48,6 +48,27 @@ def test_turn_is_trimmed_from_the_part():
     assert abs(whole.y[int(np.argmax(whole.x))] - 1.75) > abs(trimmed.y[k] - 1.75)
 
 
+def test_part_outside_keeps_the_approach_of_a_vehicle_seen_near_the_box_only():
+    """A vehicle seen from 32 m before to 32 m after the center: its parts' means lie
+    ~16 m out and are dropped as vehicles in the box (``min_center_dist`` 20 m); with
+    ``part_outside`` 20 m each part is its rows beyond 20 m, counted from the far end,
+    and both survive on the lane. A long track's parts only lose their inner rows."""
+    cfg = replace(CFG, min_center_dist=20.0, track_radius=math.inf)   # whole parts (paper)
+    x = np.arange(-32.0, 32.5, 1.0)
+    xy = np.stack([x, np.full_like(x, -1.75)], axis=1)
+    dets = Detections.make(xy, t=np.arange(len(x)) * 0.1, heading=0.0, track_id=3)
+    assert len(tracked_observations(dets, (0.0, 0.0), cfg)) == 0
+    obs = tracked_observations(dets, (0.0, 0.0), replace(cfg, part_outside=20.0))
+    assert len(obs) == 2
+    assert sorted(np.round(obs.x, 6)) == [-26.0, 26.0]     # means of the rows 20..32 m out
+    assert np.allclose(obs.y, -1.75) and sorted(obs.d) == [-1.0, 1.0]
+    x = np.arange(-80.0, 80.5, 1.0)
+    long = Detections.make(np.stack([x, np.full_like(x, -1.75)], axis=1),
+                           t=np.arange(len(x)) * 0.1, heading=0.0, track_id=4)
+    obs = tracked_observations(long, (0.0, 0.0), replace(cfg, part_outside=20.0))
+    assert sorted(np.round(obs.x, 6)) == [-50.0, 50.0]
+
+
 def test_static_false_tracks_are_dropped():
     rng = np.random.default_rng(0)
     xy = rng.normal([30.0, 5.0], 0.8, (4, 2))
