@@ -403,6 +403,37 @@ def _merged(uk, keep, cnt, sx, sy, svx, svy, merge, per_pass, step):
 
 
 @njit(cache=True, nogil=True)
+def _group_rows(group, g, rows):
+    """The rows with ``group == g`` of each column of ``rows`` (x, y, cls, arm, s, t,
+    stamp), in row order: one pass for all seven columns, no index array."""
+    n = group.shape[0]
+    m = 0
+    for i in range(n):
+        if group[i] == g:
+            m += 1
+    x, y, cls, arm, s, t, stamp = rows
+    ox = np.empty(m, x.dtype)
+    oy = np.empty(m, y.dtype)
+    oc = np.empty(m, cls.dtype)
+    oa = np.empty(m, arm.dtype)
+    os_ = np.empty(m, s.dtype)
+    ot = np.empty(m, t.dtype)
+    ost = np.empty(m, stamp.dtype)
+    q = 0
+    for i in range(n):
+        if group[i] == g:
+            ox[q] = x[i]
+            oy[q] = y[i]
+            oc[q] = cls[i]
+            oa[q] = arm[i]
+            os_[q] = s[i]
+            ot[q] = t[i]
+            ost[q] = stamp[i]
+            q += 1
+    return ox, oy, oc, oa, os_, ot, ost
+
+
+@njit(cache=True, nogil=True)
 def radar_voxels(x, y, stamp, dop, sx, sy, cx, cy, angles, reach, min_cos, min_dop,
                  keep_unknown, rays, length, width, straight, merge, gap, min_dist):
     """Radar rows -> arm-aligned voxels in one compiled pass (``preprocess.radar_observations``
@@ -413,14 +444,15 @@ def radar_voxels(x, y, stamp, dop, sx, sy, cx, cy, angles, reach, min_cos, min_d
     passages."""
     arm, s, t, group, cls = radar_frame(x, y, dop, sx, sy, cx, cy, angles, reach, min_cos,
                                         min_dop, keep_unknown, rays)
-    ia = np.flatnonzero(group == 1)
-    ib = np.flatnonzero(group == 2)
-    za = np.zeros(ia.shape[0])
-    zb = np.zeros(ib.shape[0])
-    ax, ay, ac, aw, _, _ = arm_voxels(x[ia], y[ia], cls[ia], arm[ia], s[ia], t[ia], stamp[ia],
-                                      za, za, length, width, straight, merge, gap)
-    bx, by, bc, bw, _, _ = arm_voxels(x[ib], y[ib], cls[ib], arm[ib], s[ib], t[ib], stamp[ib],
-                                      zb, zb, length, width, straight, merge, gap)
+    rows = (x, y, cls, arm, s, t, stamp)
+    a = _group_rows(group, 1, rows)
+    b = _group_rows(group, 2, rows)
+    za = np.zeros(a[0].shape[0])
+    zb = np.zeros(b[0].shape[0])
+    ax, ay, ac, aw, _, _ = arm_voxels(a[0], a[1], a[2], a[3], a[4], a[5], a[6], za, za,
+                                      length, width, straight, merge, gap)
+    bx, by, bc, bw, _, _ = arm_voxels(b[0], b[1], b[2], b[3], b[4], b[5], b[6], zb, zb,
+                                      length, width, straight, merge, gap)
     mx = np.concatenate((ax, bx))
     my = np.concatenate((ay, by))
     mc = np.concatenate((ac, bc))
