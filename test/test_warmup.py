@@ -19,7 +19,8 @@ _PROBE = textwrap.dedent('''
     print(hasattr(__import__('intersection_estimator.topology', fromlist=['x']), 'warmup'))
     for f in (refit.refit_arm, refit.refit_lane_steps, mcmc.run_chain, init.lane_guess, init.irls_center,
               preprocess.split_tracks, voxels.radar_voxels, voxels.grid_voxel_index,
-              lanes_mcmc.run_chain, observability._stamps_per_cell):
+              lanes_mcmc.run_chain, observability._occupied_squares, observability._bin_median_pass,
+              observability._track_extents, observability._moving_mask):
         print(f.__name__, len(f.signatures))
 ''')
 

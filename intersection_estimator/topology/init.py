@@ -109,11 +109,12 @@ def initial_arm_angles(p: np.ndarray, o: np.ndarray, w: np.ndarray, center, min_
     hist = np.bincount(idx, w[use], nb)
     k = np.arange(-3 * int(smooth_deg / bin_deg) - 1, 3 * int(smooth_deg / bin_deg) + 2)
     ker = np.exp(-0.5 * (k * bin_deg / smooth_deg) ** 2)
-    sm = np.zeros(nb)
-    for kk, kv in zip(k, ker):
-        sm += kv * np.roll(hist, kk)
-    peaks = [i for i in range(nb) if sm[i] >= sm[i - 1] and sm[i] > sm[(i + 1) % nb]]
-    peaks.sort(key=lambda i: -sm[i])
+    # circular smoothing: row j of the table is ker[j] * roll(hist, k[j]); the rows are
+    # summed in order (a reduction over axis 0 adds row by row), as a loop of += would
+    sm = (ker[:, None] * hist[(np.arange(nb)[None, :] - k[:, None]) % nb]).sum(axis=0)
+    peak = (sm >= np.roll(sm, 1)) & (sm > np.roll(sm, -1))
+    peaks = np.flatnonzero(peak)
+    peaks = peaks[np.argsort(-sm[peaks], kind='stable')].tolist()
     chosen: list[float] = []
     top = sm.max()
     for i in peaks:

@@ -177,6 +177,134 @@ def _voxel_slots(key, arm, sb, tb, cls):
 
 
 @njit(cache=True, nogil=True)
+def _bins(s, t, arm, cls, length, width):
+    """Per row: along-arm bin, lateral bin, voxel key (arm, along bin, lateral bin, class)
+    and band key (arm, along bin, class); and the bins' box ``(a0, s0, t0, na, ns, nt)``
+    when every bin lies strictly inside its key field (along bins in (-512, 511), lateral
+    in (-2048, 2047), classes in [0, 3]: a neighbour bin never spills into the next field),
+    else ``na = 0``."""
+    n = s.shape[0]
+    sb = np.empty(n, np.int64)
+    tb = np.empty(n, np.int64)
+    key = np.empty(n, np.int64)
+    band = np.empty(n, np.int64)
+    for i in range(n):
+        sb[i] = np.int64(math.floor(s[i] / length))
+        tb[i] = np.int64(math.floor(t[i] / width))
+        key[i] = ((arm[i] * 1024 + sb[i] + 512) * 4096 + tb[i] + 2048) * 4 + cls[i]
+        band[i] = (arm[i] * 1024 + sb[i] + 512) * 4 + cls[i]
+    box = np.zeros(6, np.int64)
+    if n == 0:
+        return sb, tb, key, band, box
+    a0, s0, t0 = arm.min(), sb.min(), tb.min()
+    a1, s1, t1 = arm.max(), sb.max(), tb.max()
+    inside = -511 <= s0 and s1 <= 510 and -2047 <= t0 and t1 <= 2046
+    if inside and 0 <= a0 and 0 <= cls.min() and cls.max() <= 3:
+        box[0], box[1], box[2] = a0, s0, t0
+        box[3], box[4], box[5] = a1 - a0 + 1, s1 - s0 + 1, t1 - t0 + 1
+    return sb, tb, key, band, box
+
+
+@njit(cache=True, nogil=True)
+def _per_passage(stamp, band, nb, gap):
+    """Detections per vehicle passage: a band's (``band`` in [0, nb)) stamp more than
+    ``gap`` s after its last starts a passage; rows taken in time order (stable)."""
+    n = stamp.shape[0]
+    last = np.full(nb, -np.inf)
+    n_pass = 0
+    ordered = True
+    for i in range(1, n):
+        if stamp[i] < stamp[i - 1]:
+            ordered = False
+            break
+    if ordered:
+        for i in range(n):
+            if stamp[i] - last[band[i]] > gap:
+                n_pass += 1
+            last[band[i]] = stamp[i]
+    else:
+        order = np.argsort(stamp, kind='mergesort')
+        for r in range(n):
+            i = order[r]
+            if stamp[i] - last[band[i]] > gap:
+                n_pass += 1
+            last[band[i]] = stamp[i]
+    return n / float(n_pass)
+
+
+@njit(cache=True, nogil=True)
+def _dense_slots(key, arm, sb, tb, cls, box):
+    """:func:`_voxel_slots` within the box of :func:`_bins` (dense table, no sort), and per
+    voxel its cell code and the table of cell -> voxel (-1 empty), for neighbour look-ups."""
+    n = key.shape[0]
+    a0, s0, t0, na, ns, nt = box[0], box[1], box[2], box[3], box[4], box[5]
+    code = np.empty(n, np.int64)
+    rank = np.full(na * ns * nt * 4, -1, np.int64)
+    for i in range(n):
+        code[i] = (((arm[i] - a0) * ns + sb[i] - s0) * nt + tb[i] - t0) * 4 + cls[i]
+        rank[code[i]] = 0
+    m = 0
+    for c in range(rank.shape[0]):
+        if rank[c] == 0:
+            rank[c] = m
+            m += 1
+    slot = np.empty(n, np.int64)
+    uk = np.empty(m, np.int64)
+    vcode = np.empty(m, np.int64)
+    for i in range(n):
+        j = rank[code[i]]
+        slot[i] = j
+        uk[j] = key[i]
+        vcode[j] = code[i]
+    return uk, slot, vcode, rank
+
+
+@njit(cache=True, nogil=True)
+def _straight_dense(vcode, rank, ns, nt):
+    """Straight-run filter on the dense table: a voxel is kept when the cells one along-arm
+    bin before and one after (lateral bin +-1, same arm and class) each hold a voxel."""
+    m = vcode.shape[0]
+    keep = np.zeros(m, np.bool_)
+    for j in range(m):
+        c = vcode[j]
+        ti = (c // 4) % nt
+        si = (c // (4 * nt)) % ns
+        before = False
+        after = False
+        for dt in (-1, 0, 1):
+            if ti + dt < 0 or ti + dt >= nt:
+                continue
+            if si > 0 and rank[c - 4 * nt + 4 * dt] >= 0:
+                before = True
+            if si < ns - 1 and rank[c + 4 * nt + 4 * dt] >= 0:
+                after = True
+        keep[j] = before and after
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def _straight_sorted(uk):
+    """Straight-run filter on the sorted keys (binary search): any key layout."""
+    step = 4096 * 4
+    m = uk.shape[0]
+    keep = np.ones(m, np.bool_)
+    for j in range(m):
+        before = False
+        after = False
+        for dt in (-4, 0, 4):
+            q = uk[j] - step + dt
+            p = np.searchsorted(uk, q)
+            if p < m and uk[p] == q:
+                before = True
+            q = uk[j] + step + dt
+            p = np.searchsorted(uk, q)
+            if p < m and uk[p] == q:
+                after = True
+        keep[j] = before and after
+    return keep
+
+
+@njit(cache=True, nogil=True)
 def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, merge, gap):
     """Arm-aligned voxels of radar / heading rows (paper §II-A voxelisation; see
     ``preprocess._arm_voxels``): key (arm, along-arm bin, lateral bin, class); with
@@ -188,40 +316,30 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
     Returns mean x, mean y, class, count in passages, summed vx, summed vy (sorted by
     the merged key).
 
-    Length (over 80 lines): one fused pass (cell codes, grouping, straight-run filter,
-    along-arm merge, passage counts) over the same scratch arrays, the preprocessing hot
-    path.
+    Bins, bands and neighbours are looked up in dense tables over the rows' box of bins
+    (:func:`_bins`, :func:`_dense_slots`, :func:`_straight_dense`); outside it (far-flung
+    rows) the keys are sorted and searched (:func:`_voxel_slots`, :func:`_straight_sorted`)
+    -- the same voxels either way.
     """
     n = x.shape[0]
     step = 4096 * 4
-    key = np.empty(n, np.int64)
-    band = np.empty(n, np.int64)
-    sb = np.empty(n, np.int64)
-    tb = np.empty(n, np.int64)
-    for i in range(n):
-        sb[i] = np.int64(math.floor(s[i] / length))
-        tb[i] = np.int64(math.floor(t[i] / width))
-        key[i] = ((arm[i] * 1024 + sb[i] + 512) * 4096 + tb[i] + 2048) * 4 + cls[i]
-        band[i] = (arm[i] * 1024 + sb[i] + 512) * 4 + cls[i]
+    sb, tb, key, band, box = _bins(s, t, arm, cls, length, width)
+    dense = box[3] > 0 and box[3] * box[4] * box[5] * 4 <= DENSE_CELLS
     # detections per vehicle passage of an along-arm band (all lateral bins together)
     per_pass = 1.0
-    if gap > 0.0 and n > 0:   # rows in time order; a band's stamp more than gap after its last
-        order = np.arange(n)
-        for i in range(1, n):
-            if stamp[i] < stamp[i - 1]:
-                order = np.argsort(stamp, kind='mergesort')
-                break
-        b0 = band.min()
-        last = np.full(band.max() - b0 + 1, -np.inf)
-        n_pass = 0
-        for r in range(n):
-            i = order[r]
-            if stamp[i] - last[band[i] - b0] > gap:
-                n_pass += 1
-            last[band[i] - b0] = stamp[i]
-        per_pass = n / float(n_pass)
+    if gap > 0.0 and n > 0:
+        if dense:   # bands numbered in the box: a small table
+            for i in range(n):
+                band[i] = ((arm[i] - box[0]) * box[4] + sb[i] - box[1]) * 4 + cls[i]
+            per_pass = _per_passage(stamp, band, box[3] * box[4] * 4, gap)
+        else:
+            b0 = band.min()
+            per_pass = _per_passage(stamp, band - b0, band.max() - b0 + 1, gap)
     # unique voxels: count and sums
-    uk, slot = _voxel_slots(key, arm, sb, tb, cls)
+    if dense:
+        uk, slot, vcode, rank = _dense_slots(key, arm, sb, tb, cls, box)
+    else:
+        uk, slot = _voxel_slots(key, arm, sb, tb, cls)
     m = uk.shape[0]
     cnt = np.zeros(m)
     sx = np.zeros(m)
@@ -237,19 +355,14 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
         svy[j] += vy[i]
     keep = np.ones(m, np.bool_)
     if straight:
-        for j in range(m):
-            before = False
-            after = False
-            for dt in (-4, 0, 4):
-                q = uk[j] - step + dt
-                p = np.searchsorted(uk, q)
-                if p < m and uk[p] == q:
-                    before = True
-                q = uk[j] + step + dt
-                p = np.searchsorted(uk, q)
-                if p < m and uk[p] == q:
-                    after = True
-            keep[j] = before and after
+        keep = _straight_dense(vcode, rank, box[4], box[5]) if dense else _straight_sorted(uk)
+    return _merged(uk, keep, cnt, sx, sy, svx, svy, merge, per_pass, step)
+
+
+@njit(cache=True, nogil=True)
+def _merged(uk, keep, cnt, sx, sy, svx, svy, merge, per_pass, step):
+    """The kept voxels with ``merge`` along-arm bins joined (sorted by the merged key):
+    mean x, mean y, class, count in passages, summed vx, summed vy."""
     idx = np.flatnonzero(keep)
     mk = idx.shape[0]
     key2 = np.empty(mk, np.int64)
@@ -290,6 +403,37 @@ def arm_voxels(x, y, cls, arm, s, t, stamp, vx, vy, length, width, straight, mer
 
 
 @njit(cache=True, nogil=True)
+def _group_rows(group, g, rows):
+    """The rows with ``group == g`` of each column of ``rows`` (x, y, cls, arm, s, t,
+    stamp), in row order: one pass for all seven columns, no index array."""
+    n = group.shape[0]
+    m = 0
+    for i in range(n):
+        if group[i] == g:
+            m += 1
+    x, y, cls, arm, s, t, stamp = rows
+    ox = np.empty(m, x.dtype)
+    oy = np.empty(m, y.dtype)
+    oc = np.empty(m, cls.dtype)
+    oa = np.empty(m, arm.dtype)
+    os_ = np.empty(m, s.dtype)
+    ot = np.empty(m, t.dtype)
+    ost = np.empty(m, stamp.dtype)
+    q = 0
+    for i in range(n):
+        if group[i] == g:
+            ox[q] = x[i]
+            oy[q] = y[i]
+            oc[q] = cls[i]
+            oa[q] = arm[i]
+            os_[q] = s[i]
+            ot[q] = t[i]
+            ost[q] = stamp[i]
+            q += 1
+    return ox, oy, oc, oa, os_, ot, ost
+
+
+@njit(cache=True, nogil=True)
 def radar_voxels(x, y, stamp, dop, sx, sy, cx, cy, angles, reach, min_cos, min_dop,
                  keep_unknown, rays, length, width, straight, merge, gap, min_dist):
     """Radar rows -> arm-aligned voxels in one compiled pass (``preprocess.radar_observations``
@@ -300,14 +444,15 @@ def radar_voxels(x, y, stamp, dop, sx, sy, cx, cy, angles, reach, min_cos, min_d
     passages."""
     arm, s, t, group, cls = radar_frame(x, y, dop, sx, sy, cx, cy, angles, reach, min_cos,
                                         min_dop, keep_unknown, rays)
-    ia = np.flatnonzero(group == 1)
-    ib = np.flatnonzero(group == 2)
-    za = np.zeros(ia.shape[0])
-    zb = np.zeros(ib.shape[0])
-    ax, ay, ac, aw, _, _ = arm_voxels(x[ia], y[ia], cls[ia], arm[ia], s[ia], t[ia], stamp[ia],
-                                      za, za, length, width, straight, merge, gap)
-    bx, by, bc, bw, _, _ = arm_voxels(x[ib], y[ib], cls[ib], arm[ib], s[ib], t[ib], stamp[ib],
-                                      zb, zb, length, width, straight, merge, gap)
+    rows = (x, y, cls, arm, s, t, stamp)
+    a = _group_rows(group, 1, rows)
+    b = _group_rows(group, 2, rows)
+    za = np.zeros(a[0].shape[0])
+    zb = np.zeros(b[0].shape[0])
+    ax, ay, ac, aw, _, _ = arm_voxels(a[0], a[1], a[2], a[3], a[4], a[5], a[6], za, za,
+                                      length, width, straight, merge, gap)
+    bx, by, bc, bw, _, _ = arm_voxels(b[0], b[1], b[2], b[3], b[4], b[5], b[6], zb, zb,
+                                      length, width, straight, merge, gap)
     mx = np.concatenate((ax, bx))
     my = np.concatenate((ay, by))
     mc = np.concatenate((ac, bc))

@@ -1,5 +1,6 @@
 """References of the compiled initialisation (:mod:`intersection_estimator.topology.init`):
-the numpy code ``irls_center`` and ``lane_guess`` replaced."""
+the numpy code ``irls_center`` and ``lane_guess`` replaced, and the loop the vectorised
+histogram smoothing of ``initial_arm_angles`` replaced."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import math
 
 import numpy as np
 
+from intersection_estimator.model import wrap_angle
 from intersection_estimator.topology.likelihood import ObservationSet
 
 
@@ -101,3 +103,46 @@ def initial_lanes_reference(obs: ObservationSet, center, angles, lane_width: flo
         lam = 1e-3 * max(np.trace(A), 1e-9)
         c = np.linalg.solve(A + lam * np.eye(2), b + lam * c)
     return c, params
+
+
+def initial_arm_angles_reference(p: np.ndarray, o: np.ndarray, w: np.ndarray, center, min_sep: float,
+                       max_arms: int, min_dist: float = 10.0, peak_frac: float = 0.12,
+                       bin_deg: float = 2.0, smooth_deg: float = 4.0) -> list[float]:
+    """The loop of ``np.roll`` and the peak list the vectorised smoothing replaced
+    (``init.initial_arm_angles`` at 99ef205, verbatim). Arm angles from a histogram of
+    outward driving directions around ``center``.
+
+    Only lines far enough from the center and roughly radial are used; the direction is
+    flipped to point away from the center, so every lane of an arm votes for the arm's
+    angle regardless of its lateral offset.
+    """
+    if len(p) == 0:
+        return []
+    v = p - np.asarray(center, float)
+    dist = np.hypot(v[:, 0], v[:, 1])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        radial = np.sum(o * v, axis=1) / np.maximum(dist, 1e-9)
+    use = (dist > min_dist) & (np.abs(radial) > math.cos(math.radians(35.0)))
+    if not use.any():
+        return []
+    out = o[use] * np.sign(radial[use])[:, None]
+    ang = np.arctan2(out[:, 1], out[:, 0])
+    nb = int(round(360.0 / bin_deg))
+    idx = np.floor(np.mod(ang, 2 * math.pi) / (2 * math.pi) * nb).astype(int) % nb
+    hist = np.bincount(idx, w[use], nb)
+    k = np.arange(-3 * int(smooth_deg / bin_deg) - 1, 3 * int(smooth_deg / bin_deg) + 2)
+    ker = np.exp(-0.5 * (k * bin_deg / smooth_deg) ** 2)
+    sm = np.zeros(nb)
+    for kk, kv in zip(k, ker):
+        sm += kv * np.roll(hist, kk)
+    peaks = [i for i in range(nb) if sm[i] >= sm[i - 1] and sm[i] > sm[(i + 1) % nb]]
+    peaks.sort(key=lambda i: -sm[i])
+    chosen: list[float] = []
+    top = sm.max()
+    for i in peaks:
+        if sm[i] < peak_frac * top or len(chosen) >= max_arms:
+            break
+        a = float(wrap_angle((i + 0.5) * 2 * math.pi / nb))
+        if all(abs(float(wrap_angle(a - b))) >= min_sep for b in chosen):
+            chosen.append(a)
+    return chosen

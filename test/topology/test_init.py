@@ -58,3 +58,26 @@ def test_compiled_initialisation_equals_the_numpy_reference(mode):
             assert [(n1, n2) for _, n1, n2, _ in g1] == [(n1, n2) for _, n1, n2, _ in g2]
             np.testing.assert_allclose([(g, wd) for g, _, _, wd in g1],
                                        [(g, wd) for g, _, _, wd in g2], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize('mode', ['tracked', 'raw', 'heading'])
+def test_arm_angles_equal_the_loop_of_rolls(mode):
+    """The vectorised histogram smoothing and peak search of ``initial_arm_angles`` give
+    the angles of the loop they replaced (test/reference/init.py), float for float, on
+    simulated scenes around the initial center and around shifted centers."""
+    from intersection_estimator.pipeline import in_mode
+    from intersection_estimator.sim import simulate_scenario
+    from intersection_estimator.topology.config import TopologyConfig
+    from intersection_estimator.topology.init import seed_lines
+    from reference.init import initial_arm_angles_reference
+    cfg = TopologyConfig()
+    rng = np.random.default_rng(5)
+    for seed in range(6):
+        dets = in_mode(simulate_scenario(seed).detections(mode), mode)
+        p, o, w = seed_lines(dets, cfg.preprocess_config())
+        c = initial_center(p, o, w)
+        for cc in (c, c + rng.normal(0.0, 10.0, 2)):
+            for peak_frac in (cfg.init_peak_frac, 0.0):
+                args = (p, o, w, cc, math.radians(cfg.min_sep_deg), cfg.max_arms)
+                assert initial_arm_angles(*args, peak_frac=peak_frac) == \
+                    initial_arm_angles_reference(*args, peak_frac=peak_frac)

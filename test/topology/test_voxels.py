@@ -94,3 +94,40 @@ def test_compiled_voxel_index_equals_sorted_unique_keys(seed, size, far):
     want = voxelise_reference(xy, cls, size, vec)
     for g, w in zip(got, want):
         np.testing.assert_array_equal(g, w)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10 ** 6), st.sampled_from([1, 2, 3]), st.booleans(),
+       st.sampled_from([0.0, 1.0]), st.sampled_from(['dense', 'far', 'high', 'low', 'beyond']))
+def test_arm_voxels_equal_the_kernel_before_the_dense_tables_bit_for_bit(seed, merge, straight,
+                                                                         gap, layout):
+    """The dense band / cell / neighbour tables (issue 18) give the arrays of the sorted
+    keys and binary searches they replaced (test/reference/voxels_before.py), every float
+    equal: rows in the box, a far-flung row (no dense table), bins at the top and the
+    bottom of their key fields (along 510 / -511, lateral 2046 / -2047) and beyond them
+    (the sorted path)."""
+    from reference.voxels_before import arm_voxels_before
+    from intersection_estimator.topology.voxels import arm_voxels
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 2500))
+    arm = rng.integers(0, 5, n)
+    s = rng.uniform(-15.0, 120.0, n)
+    t = np.round(rng.normal(0.0, 5.0, n), 1)
+    if n and layout == 'far':
+        s[0], t[0] = 4000.0, 1500.0
+    if layout == 'high':      # the top of the key fields, still in a dense table
+        s, t = np.minimum(s + 4990.0, 5109.9), np.minimum(t + 2035.0, 2046.9)
+    if layout == 'low':
+        s, t = np.maximum(s - 5095.0, -5110.0), np.maximum(t - 2035.0, -2047.0)
+    if layout == 'beyond':    # bins spill into the next key field: sorted keys
+        s, t = s + 5010.0, t + 2040.0
+    cls = rng.integers(0, 4, n)
+    stamp = np.round(rng.uniform(0.0, 30.0, n), int(seed % 3))
+    if seed % 4:
+        stamp = np.sort(stamp)
+    vx, vy = rng.normal(size=n), rng.normal(size=n)
+    args = (s * 0.6 - t * 0.8, s * 0.8 + t * 0.6, cls, arm, s, t, stamp, vx, vy, 10.0, 1.0,
+            straight, merge, gap)
+    got, want = arm_voxels(*args), arm_voxels_before(*args)
+    for g, w in zip(got, want):
+        assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
