@@ -21,8 +21,8 @@ from .arm_offset import offset_log_prior
 from .prior import log_prior
 from .state import MAXA, P_FLOOR, Chain
 
-__all__ = ['temperatures', 'advance', 'acceptance_rates', 'Posterior', 'run_chain',
-           'observation_maxima', 'rescore_arm', 'WORK_FIELDS', 'W_MOVES', 'W_ENTRIES',
+__all__ = ['temperatures', 'advance', 'acceptance_rates', 'state_log_prior', 'Posterior',
+           'run_chain', 'observation_maxima', 'rescore_arm', 'WORK_FIELDS', 'W_MOVES', 'W_ENTRIES',
            'W_VISITS', 'W_LOGS', 'W_MUST_ENTRIES', 'W_MUST_LOGS', 'new_work']
 
 #: Work counters of :func:`run_chain` (int64 vector ``work``, summed over calls; the cost
@@ -67,6 +67,13 @@ def acceptance_rates(stats: np.ndarray) -> dict:
             for i, name in enumerate(MOVE_NAMES)}
 
 
+@njit(cache=True)
+def state_log_prior(S, P, logPA, logPn, arm_const):
+    """log P(I) of state ``S``: the paper's count and uniform priors (§II-C1,
+    :func:`.prior.log_prior`) plus the arm-axis offsets' (:mod:`.arm_offset`; 0 when off)."""
+    return log_prior(S, logPA, logPn, arm_const) + offset_log_prior(S, P)
+
+
 class Posterior:
     """log P(I|Z) + const of packed states on one observation set (paper §II-C):
     ``tables`` is a :class:`.config.Tables`, ``obs`` an :class:`ObservationSet`."""
@@ -92,7 +99,7 @@ class Posterior:
 
     def log_prior(self, S) -> float:
         t = self.t
-        return float(log_prior(S, t.logPA, t.logPn, t.arm_const) + offset_log_prior(S, t.P))
+        return float(state_log_prior(S, t.P, t.logPA, t.logPn, t.arm_const))
 
     def __call__(self, S) -> float:
         """log P(I|Z) + const of ``S`` (scored in full)."""
@@ -276,7 +283,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
             work[W_LOGS] += cnt
         if audit:
             _audit_move(work, kind, k, n, C, C2, col, M, M2, nM, idx, cnt)
-        lp2 = log_prior(S2, logPA, logPn, arm_const) + offset_log_prior(S2, P)
+        lp2 = state_log_prior(S2, P, logPA, logPn, arm_const)
         a = (ll2 + lp2 - ll - lp) / temps[step] + lq
         if a < 0.0 and math.log(np.random.random()) >= a:
             continue

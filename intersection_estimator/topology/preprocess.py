@@ -87,9 +87,9 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
                          np.full(len(o), cfg.sigma_track),
                          np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
-    if cfg.part_outside > 0:     # parts cut at that radius: it is also their box radius
-        return obs.subset(np.hypot(obs.x - c[0], obs.y - c[1]) >= cfg.part_outside)
-    return _drop_near_center(obs, c, cfg, far=False)
+    # parts cut at part_outside: that radius is also their box radius
+    return _drop_near_center(obs, c, cfg, far=False,
+                             inner=cfg.part_outside if cfg.part_outside > 0 else None)
 
 
 def _rows_within(c, radius: float, starts, ends, tid, xy, hd):
@@ -258,15 +258,16 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
     return _drop_near_center(obs, c, cfg)
 
 
-def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig, far: bool = True) -> ObservationSet:
-    """Observations in the ring ``min_center_dist <= r <= max_center_dist`` around ``c``
-    (``far`` False: no outer bound)."""
+def _drop_near_center(obs: ObservationSet, c, cfg: PreprocessConfig, far: bool = True,
+                      inner: float | None = None) -> ObservationSet:
+    """Observations in the ring ``inner <= r <= max_center_dist`` around ``c`` (``inner``
+    defaults to ``min_center_dist``; ``far`` False: no outer bound)."""
+    inner = cfg.min_center_dist if inner is None else inner
     far = far and math.isfinite(cfg.max_center_dist)
-    if (cfg.min_center_dist <= 0 and not far) or len(obs) == 0:
+    if (inner <= 0 and not far) or len(obs) == 0:
         return obs
     r = np.hypot(obs.x - c[0], obs.y - c[1])
-    return obs.subset((r >= cfg.min_center_dist) & (r <= cfg.max_center_dist) if far else
-                      r >= cfg.min_center_dist)
+    return obs.subset((r >= inner) & (r <= cfg.max_center_dist) if far else r >= inner)
 
 
 def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,

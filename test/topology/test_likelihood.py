@@ -11,7 +11,7 @@ from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.likelihood import (ObservationSet, all_columns, full_loglik,
                                                         log_likelihood)
-from intersection_estimator.topology.mcmc import advance, temperatures
+from intersection_estimator.topology.mcmc import advance, state_log_prior, temperatures
 from intersection_estimator.topology.arm_offset import offset_log_prior
 from intersection_estimator.topology.moves import MOVE_NAMES, OFFSET
 from intersection_estimator.topology.prior import log_prior
@@ -46,7 +46,7 @@ def test_incremental_likelihood_equals_reference_along_a_chain(offset_max):
     S = pack_state(inter)
     C = np.zeros((MAXA, len(obs)))
     ll = float(full_loglik(S, TAB.P, *obs.kernel_args(), C))
-    lp = float(log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const) + offset_log_prior(S, TAB.P))
+    lp = float(state_log_prior(S, TAB.P, TAB.logPA, TAB.logPn, TAB.arm_const))
     ch = Chain(S=S, C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
                stats=np.zeros(2 * len(MOVE_NAMES), np.int64))
     for i in range(10):
@@ -59,7 +59,7 @@ def test_incremental_likelihood_equals_reference_along_a_chain(offset_max):
         all_columns(ch.S, TAB.P, *obs.kernel_args()[:8], C2)
         assert np.allclose(ch.C[:n], C2[:n], rtol=0, atol=1e-12)
         assert abs(ch.lp - log_prior(ch.S, TAB.logPA, TAB.logPn, TAB.arm_const)
-                   - offset_log_prior(ch.S, TAB.P)) < 1e-9
+                   - offset_log_prior(ch.S, TAB.P)) < 1e-9     # the two priors, added here
     acc = ch.stats[1::2]
     assert (acc[:6] > 0).all(), acc     # every move kind was accepted at least once
     assert (acc[OFFSET] > 0) == (offset_max > 0), acc
