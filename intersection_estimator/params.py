@@ -56,6 +56,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('doppler_sign', 1, '+1: positive Doppler = moving away from the sensor; -1: the opposite',
               choices=(1, -1)),
     ParamSpec('min_existence_probability', 0.3, 'tracked objects below this are ignored', 0.0, 1.0),
+    ParamSpec('weak_labels', [6, 7], 'classification labels (Autoware ids) of tracked road users that '
+              'count as traffic of an arm but cannot ask for a lane of their own (they do not keep '
+              'to a lane center): bicycle 6, pedestrian 7; [] = every label is a lane user'),
     ParamSpec('mount_frames', ['radar'], 'sensor frame ids with a static mount on base_link (fallback '
               'for frames /tf_static does not connect to base_link)'),
     ParamSpec('mount_x', [3.7], 'mount x of each mount_frames entry in base_link [m]'),
@@ -133,6 +136,10 @@ def check_all(values: dict) -> list[str]:
             check_origin(values['geo_origin'], 'geo_origin')
         except ValueError as exc:
             errors.append(str(exc))
+        bad = [v for v in values['weak_labels']
+               if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 255]
+        if bad:
+            errors.append(f'weak_labels must hold classification ids in [0, 255], got {bad!r}')
         n = len(values['mount_frames'])
         for k in ('mount_x', 'mount_y', 'mount_yaw'):
             if len(values[k]) != n:
@@ -165,12 +172,15 @@ def mounts(values: dict) -> dict[str, tuple[float, float, float]]:
 def pipeline_config(values: dict):
     """Map parameter values onto a validated :class:`~.pipeline.PipelineConfig`."""
     from .pipeline import PipelineConfig
+    from .topology import TopologyConfig
     cfg = replace(PipelineConfig(), window_s=float(values['window_s']),
                   max_observations=int(values['max_observations']),
                   topology_samples=int(values['topology_samples']),
                   lane_samples=int(values['lane_samples']),
                   budget_s=float(values['budget_ms']) / 1e3, lane_share=float(values['lane_share']),
                   lanes_enabled=bool(values['lanes_enabled']), lane_period=float(values['lane_period']),
-                  reset_distance=float(values['reset_distance']))
+                  reset_distance=float(values['reset_distance']),
+                  topology=replace(TopologyConfig(),
+                                   weak_labels=tuple(int(v) for v in values['weak_labels'])))
     cfg.validate()
     return cfg

@@ -45,3 +45,10 @@ def test_unknown_parameter_is_refused(tmp_path):
     f.write_text('intersection_estimator:\n  ros__parameters:\n    budjet_ms: 10.0\n')
     with pytest.raises(ValueError, match='budjet_ms'):
         P.load_yaml(f)
+
+
+def test_weak_labels_reach_the_topology_and_bad_ones_are_refused():
+    assert P.pipeline_config(P.defaults()).topology.weak_labels == (6, 7)
+    assert P.pipeline_config(dict(P.defaults(), weak_labels=[])).topology.weak_labels == ()
+    for bad in (['bike'], [6.5], [300], [True]):
+        assert any('weak_labels' in e for e in P.check_all(dict(P.defaults(), weak_labels=bad)))

@@ -70,6 +70,10 @@ RANGES = {
     'lane_count_prior': (None, 'P(lanes per direction = i), i = 0..len-1'),
     # likelihood (§II-C2)
     'sigma_track': ('[0.01, 20]', 'lateral sigma of a trajectory part\'s mean point [m]'),
+    'sigma_track_weak': ('[0.01, 20]', 'lateral sigma of a trajectory part of a weak_labels road '
+                         'user (cyclist, pedestrian: not at a lane center) [m]'),
+    'weak_labels': (None, 'Autoware classification labels whose tracks count as traffic of an '
+                    'arm but not of a lane of their own (sigma_track_weak)'),
     'sigma_point': ('[0.01, 20]', 'lateral sigma of a detection (raw / heading voxel) [m]'),
     'sigma_angle_deg': ('[0.1, 90]', 'heading sigma of a trajectory part / detection [deg]'),
     'pca_radius': ('[1, 50]', 'initial center: radius of the local PCA of radar voxels [m]'),
@@ -109,6 +113,10 @@ RANGES = {
     'part_outside': ('[0, 100]', 'trajectory parts: only their rows beyond this distance from the '
                      'center, from the far end, and it replaces min_center_dist for them (0: the '
                      'whole part, paper §II-A; preprocess.split_tracks) [m]'),
+    'bend_min_deg': ('[0, 90]', 'straighten an arm direction whose traffic turns by at least this '
+                     'along the arm before the parts are reduced (0: off, straight arms, paper '
+                     '§II-B; bend.py) [deg]'),
+    'bend_bin': ('[1, 30]', 'bin length along the arm of the bend profile (bend.py) [m]'),
     'min_center_dist': ('[0, 100]', 'observations closer to the center are dropped (vehicles '
                         'turn inside the box; lanes are straight rays, §II-B) [m]'),
     'arm_reach': ('[1, 100]', 'rows farther from every arm axis are voxelised along rays '
@@ -193,6 +201,8 @@ class TopologyConfig:
     lane_count_prior: tuple = LANE_COUNT_PRIOR
     # likelihood
     sigma_track: float = 0.8
+    sigma_track_weak: float = 4.0
+    weak_labels: tuple = (6, 7)
     sigma_point: float = 1.2
     sigma_angle_deg: float = 5.0
     pca_radius: float = 8.0
@@ -223,6 +233,8 @@ class TopologyConfig:
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0
     part_outside: float = 12.0
+    bend_min_deg: float = 0.0
+    bend_bin: float = 5.0
     max_center_dist: float = math.inf
     track_radius: float = 75.0
     trim_longest: bool = True
@@ -272,6 +284,9 @@ class TopologyConfig:
               and sum(self.lane_count_prior[self.min_lanes:self.max_lanes + 1]) > 0,
               'non-negative probabilities with mass on [min_lanes, max_lanes]')
         _check_flags(self)
+        _need(self, 'weak_labels', isinstance(self.weak_labels, tuple)
+              and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                      for v in self.weak_labels), 'a tuple of integer labels')
         return self
 
     @property
@@ -339,12 +354,12 @@ def _check_flags(cfg) -> None:
 
 #: The parameters preprocessing (preprocess.py, voxels.py, init.py) reads.
 PREPROCESS_FIELDS = (
-    'sigma_track', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
+    'sigma_track', 'sigma_track_weak', 'weak_labels', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
     'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
     'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
-    'track_radius', 'trim_longest', 'arm_reach', 'part_outside')
+    'track_radius', 'trim_longest', 'arm_reach', 'part_outside', 'bend_min_deg', 'bend_bin')
 
 
 def _preprocess_validate(self) -> 'PreprocessConfig':

@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from ..observations import Detections
+from .bend import straighten
 from .config import PreprocessConfig
 from .likelihood import ObservationSet
 from .state import wrap
@@ -50,15 +51,18 @@ def _direction_class(x, y, hx, hy, center):
     return np.where(hx * (center[0] - x) + hy * (center[1] - y) > 0, 1.0, -1.0)
 
 
-def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> ObservationSet:
-    """Split trajectories at the point closest to ``center``; mean point + direction."""
+def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
+                         arm_angles=None) -> ObservationSet:
+    """Split trajectories at the point closest to ``center``; mean point + direction.
+    With ``arm_angles`` and ``bend_min_deg > 0`` the rows of bent approaches are first
+    straightened along their arms (:mod:`.bend`, beyond the paper)."""
     sel = dets.track_id >= 0
     if not sel.any():
         return ObservationSet.empty()
     tid, t, xy, hd = dets.track_id[sel], dets.t[sel], dets.xy[sel], dets.heading[sel]
-    sp = dets.speed[sel]
+    sp, lab = dets.speed[sel], dets.label[sel]
     order = np.lexsort((t, tid))
-    tid, xy, hd, sp = tid[order], xy[order], hd[order], sp[order]
+    tid, xy, hd, sp, lab = tid[order], xy[order], hd[order], sp[order], lab[order]
     starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
     ends = np.r_[starts[1:], len(tid)]
     if cfg.min_track_speed > 0 and np.isfinite(sp).any():   # static (false) tracks
@@ -68,6 +72,7 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
         if len(starts) == 0:
             return ObservationSet.empty()
     c = np.asarray(center, float)
+    track_label = lab[starts]
     if math.isfinite(cfg.track_radius):   # parts made of the rows near the box only
         starts, ends, tid, xy, hd = _rows_within(c, cfg.track_radius, starts, ends, tid, xy, hd)
         if len(starts) == 0:
@@ -77,7 +82,12 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
             h = hd[a:b]
             if not np.isfinite(h).all():
                 hd[a:b] = _path_heading(xy[a:b])
-    o = split_tracks(xy[:, 0].copy(), xy[:, 1].copy(), hd, starts, ends, float(c[0]), float(c[1]),
+    x, y = xy[:, 0].copy(), xy[:, 1].copy()
+    if arm_angles is not None and cfg.bend_min_deg > 0:
+        reach = cfg.track_radius + 10.0 if math.isfinite(cfg.track_radius) else 150.0
+        x, y, hd, _ = straighten(x, y, hd, starts, ends, c, arm_angles, cfg.part_outside,
+                                 reach, cfg.bend_bin, cfg.bend_min_deg)
+    o = split_tracks(x, y, hd, starts, ends, float(c[0]), float(c[1]),
                      cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5,
                      bool(cfg.trim_longest), float(cfg.part_outside))
     if len(o) == 0:
@@ -85,11 +95,25 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig) -> Obs
     hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
     d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
-                         np.full(len(o), cfg.sigma_track),
+                         _part_sigma(track_label, o[:, 4].astype(np.int64), cfg),
                          np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
     # parts cut at part_outside: that radius is also their box radius
     return _drop_near_center(obs, c, cfg, far=False,
                              inner=cfg.part_outside if cfg.part_outside > 0 else None)
+
+
+def _part_sigma(track_label, part_track, cfg: PreprocessConfig) -> np.ndarray:
+    """Orthogonal-distance sigma per trajectory part: ``sigma_track``, and
+    ``sigma_track_weak`` for road users that do not keep to a lane's center
+    (``weak_labels``, Autoware classification ids; by default bicycle 6 and pedestrian 7:
+    a cyclist rides at the kerb side of its lane). Beyond the paper: such a part still
+    shows that its arm exists and carries traffic, but its lateral position cannot ask for
+    a lane of its own."""
+    sig = np.full(len(part_track), cfg.sigma_track)
+    if cfg.weak_labels and len(part_track):
+        weak = np.isin(track_label[part_track], np.asarray(cfg.weak_labels, np.int64))
+        sig[weak] = cfg.sigma_track_weak
+    return sig
 
 
 def _rows_within(c, radius: float, starts, ends, tid, xy, hd):
@@ -275,7 +299,7 @@ def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
     """All observation kinds of ``dets`` for the current ``center`` (paper §II-A);
     ``radar``: :func:`radar_rows` of ``dets.finite()`` when already at hand."""
     dets = dets.finite()
-    return ObservationSet.concat([tracked_observations(dets, center, cfg),
+    return ObservationSet.concat([tracked_observations(dets, center, cfg, arm_angles),
                                   radar_observations(dets, center, cfg, arm_angles, radar),
                                   heading_observations(dets, center, cfg, arm_angles)])
 
@@ -364,13 +388,13 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, long
     deviations from the far-end direction below ``tol``): the turn inside the intersection
     box would bias the mean point and direction; with ``longest`` the longest straight run
     of the part is kept instead of the first (:func:`straight_run`). Returns (mx, my, vx,
-    vy) per kept part.
+    vy, trajectory index) per kept part.
 
     Length (over 80 lines): one pass per trajectory (closest point, split, straight-run
     trim, means); helpers would need the same dozen loop-carried variables.
     """
     nt = starts.shape[0]
-    out = np.empty((2 * nt, 4))
+    out = np.empty((2 * nt, 5))
     m = 0
     for t in range(nt):
         a = starts[t]
@@ -420,5 +444,6 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, long
             out[m, 1] = my / keep
             out[m, 2] = vx
             out[m, 3] = vy
+            out[m, 4] = t
             m += 1
     return out[:m]
