@@ -57,8 +57,9 @@ PARAMS: tuple[ParamSpec, ...] = (
               choices=(1, -1)),
     ParamSpec('min_existence_probability', 0.3, 'tracked objects below this are ignored', 0.0, 1.0),
     ParamSpec('weak_labels', [6, 7], 'classification labels (Autoware ids) of tracked road users that '
-              'count as traffic of an arm but cannot ask for a lane of their own (they do not keep '
-              'to a lane center): bicycle 6, pedestrian 7; [] = every label is a lane user'),
+              'count as traffic of an arm but neither ask for a lane of their own nor shape the lane '
+              'course (they do not keep to a lane center): bicycle 6, pedestrian 7; [] = every '
+              'label is a lane user'),
     ParamSpec('mount_frames', ['radar'], 'sensor frame ids with a static mount on base_link (fallback '
               'for frames /tf_static does not connect to base_link)'),
     ParamSpec('mount_x', [3.7], 'mount x of each mount_frames entry in base_link [m]'),
@@ -172,7 +173,9 @@ def mounts(values: dict) -> dict[str, tuple[float, float, float]]:
 def pipeline_config(values: dict):
     """Map parameter values onto a validated :class:`~.pipeline.PipelineConfig`."""
     from .pipeline import PipelineConfig
+    from .lanes import LaneConfig
     from .topology import TopologyConfig
+    weak = tuple(int(v) for v in values['weak_labels'])
     cfg = replace(PipelineConfig(), window_s=float(values['window_s']),
                   max_observations=int(values['max_observations']),
                   topology_samples=int(values['topology_samples']),
@@ -180,7 +183,7 @@ def pipeline_config(values: dict):
                   budget_s=float(values['budget_ms']) / 1e3, lane_share=float(values['lane_share']),
                   lanes_enabled=bool(values['lanes_enabled']), lane_period=float(values['lane_period']),
                   reset_distance=float(values['reset_distance']),
-                  topology=replace(TopologyConfig(),
-                                   weak_labels=tuple(int(v) for v in values['weak_labels'])))
+                  topology=replace(TopologyConfig(), weak_labels=weak),
+                  lanes=replace(LaneConfig(), skip_labels=weak))
     cfg.validate()
     return cfg

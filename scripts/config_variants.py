@@ -4,7 +4,7 @@
         --variant base: --variant r50:topology.max_center_dist=50
 
 Each case is made once (``bench.make_case``) and estimated with every variant's overrides
-(``name:section.key=value,...``; sections ``topology`` (TopologyConfig) and ``lanes``
+(``name:section.key=value,...``, a tuple as ``6+7``; sections ``topology`` (TopologyConfig) and ``lanes``
 (LaneConfig)); the pooled metrics of each variant are printed (``evaluate.aggregate``) and,
 with ``--json``, written with the per-case metrics.
 """
@@ -32,6 +32,8 @@ SECTIONS = {'topology': TopologyConfig, 'lanes': LaneConfig}
 def _typed(old, text: str):
     if isinstance(old, bool):
         return text.lower() in ('1', 'true', 'yes')
+    if isinstance(old, tuple):                  # labels: 'lanes.skip_labels=6+7', '' = ()
+        return tuple(int(v) for v in text.split('+') if v)
     return type(old)(float(text)) if isinstance(old, (int, float)) else text
 
 

@@ -165,3 +165,18 @@ def test_connector_initial_shape_is_the_arc_bezier():
         assert np.nanmax(orthogonal_distances(c.center, ref)) < 0.02
         step = np.linalg.norm(np.diff(c.center[::2], axis=0), axis=1)
         assert step.max() - step.min() < 0.1 * step.mean()
+
+
+def test_skipped_labels_stay_out_of_the_lane_course_trajectories():
+    """``LaneConfig.skip_labels``: a cyclist's track (Autoware 6) is not a lane trajectory,
+    a car's is; with ``()`` both are."""
+    from intersection_estimator.lanes.init import trajectories
+    from intersection_estimator.observations import Detections
+    x = np.arange(-40.0, 40.0, 1.0)
+    xy = np.concatenate([np.column_stack([x, np.full_like(x, -1.75)]),
+                         np.column_stack([x, np.full_like(x, -3.2)])])
+    tid = np.r_[np.zeros(len(x), int), np.ones(len(x), int)]
+    label = np.r_[np.full(len(x), 1), np.full(len(x), 6)]
+    dets = Detections.make(xy, t=np.r_[x, x] * 0.1, heading=0.0, track_id=tid, label=label)
+    assert [t.track_id for t in trajectories(dets, (6, 7))] == [0]
+    assert [t.track_id for t in trajectories(dets)] == [0, 1]

@@ -48,7 +48,9 @@ def test_unknown_parameter_is_refused(tmp_path):
 
 
 def test_weak_labels_reach_the_topology_and_bad_ones_are_refused():
-    assert P.pipeline_config(P.defaults()).topology.weak_labels == (6, 7)
-    assert P.pipeline_config(dict(P.defaults(), weak_labels=[])).topology.weak_labels == ()
+    cfg = P.pipeline_config(P.defaults())
+    assert cfg.topology.weak_labels == cfg.lanes.skip_labels == (6, 7)
+    none = P.pipeline_config(dict(P.defaults(), weak_labels=[]))
+    assert none.topology.weak_labels == none.lanes.skip_labels == ()
     for bad in (['bike'], [6.5], [300], [True]):
         assert any('weak_labels' in e for e in P.check_all(dict(P.defaults(), weak_labels=bad)))

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+import numpy as np
+
+
 from ..ranges import check_table
 
 __all__ = ['LaneConfig']
@@ -23,6 +26,9 @@ _RANGES = {
     'traffic_min_points': ('[3, 1e6]', 'fewest trajectory points to shape a connector'),
     'traffic_select': ('[0.0, 1000.0]', 'the fit replaces the start shape only when better by this '
                        'per parameter (2: Akaike; 0: always)'),
+    'skip_labels': (None, 'classification labels (Autoware ids) of tracked road users left out of '
+                    'the lane course (e.g. 6, 7: cyclists ride at the kerb, pedestrians cross); '
+                    '(): every track; node parameter weak_labels'),
     'follow_lanes': ('[0, 1]', '1: entering/leaving lanelets shaped by their traffic (lanes/follow.py), '
                      '0: straight along the arm (paper)'),
     'follow_ctrl_spacing': ('[1.0, 100.0]', 'axis distance per control point of that shift [m]'),
@@ -112,6 +118,7 @@ class LaneConfig:
     traffic_min_points: int = 10
     traffic_select: float = 2.0
     follow_lanes: int = 1
+    skip_labels: tuple = (6, 7)
     follow_ctrl_spacing: float = 10.0
     follow_smooth: float = 0.5
     follow_select: float = 2.0
@@ -181,6 +188,11 @@ class LaneConfig:
     def validate(self) -> 'LaneConfig':
         """Raise ``ValueError`` naming the first parameter outside its allowed range."""
         check_table(self, {f.name: _RANGES[f.name] for f in fields(self)})
+        if not (isinstance(self.skip_labels, tuple)
+                and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                        for v in self.skip_labels)):
+            raise ValueError(f'LaneConfig.skip_labels={self.skip_labels!r}: needs a tuple of '
+                             'integer labels')
         if self.arm_length_min > self.arm_length_max:
             raise ValueError('LaneConfig.arm_length_min must be <= arm_length_max')
         if self.stop_min > self.stop_max:

@@ -152,7 +152,7 @@ class LaneCourseEstimator:
     def _preprocess(self, topology: Intersection, dets: Detections | None):
         """Trajectories split and assigned, arm frames re-fitted, stop lines fitted."""
         cfg = self.config
-        trajs = trajectories(dets)
+        trajs = trajectories(dets, cfg.skip_labels)
         stops = stop_distances(topology, cfg)
         assign_parts(trajs, topology, cfg, stops)
         frames = arm_frames(topology)

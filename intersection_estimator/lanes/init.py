@@ -47,11 +47,15 @@ class Trajectory:
     lane_out: tuple | None = None    # (arm, k) of the leaving part
 
 
-def trajectories(dets: Detections | None) -> list[Trajectory]:
-    """Rows with ``track_id >= 0`` grouped per id and sorted by ``t``; id -1 ignored."""
+def trajectories(dets: Detections | None, skip_labels=()) -> list[Trajectory]:
+    """Rows with ``track_id >= 0`` grouped per id and sorted by ``t``; id -1 ignored, and
+    rows whose classification label is in ``skip_labels`` (beyond the paper: road users
+    that do not keep to a lane center, ``LaneConfig.skip_labels``)."""
     if dets is None or len(dets) == 0:
         return []
     ok = (dets.track_id >= 0) & np.isfinite(dets.xy).all(axis=1) & np.isfinite(dets.t)
+    if len(skip_labels):
+        ok &= ~np.isin(dets.label, np.asarray(skip_labels, np.int64))
     if not ok.any():
         return []
     ids, xy, t = dets.track_id[ok], dets.xy[ok], dets.t[ok]
