@@ -25,6 +25,13 @@ the center). Compiled here:
   normalising constant per arm is in :func:`offset_log_const` (folded into the per-arm
   constant of :func:`.prior.log_prior`).
 
+With ``TopologyConfig.arm_offset_prior = 'laplace'`` the prior is instead a Laplace
+density ``exp(-|o| / sigma) / (2 sigma)`` truncated the same way (``sigma`` its scale):
+it charges ``|o| / sigma`` nats, so a metre of offset that only fits noise costs much more
+than under the normal of the same tail, while an arm several metres off still pays less
+than the extra lanes the straight rays would need. The add-arm draw follows the prior's
+kind.
+
 Off (``TopologyConfig.arm_offset_max = 0``): every offset stays 0, the move is never
 picked, the add-arm move draws nothing for it -- the sampler's random stream and every
 estimate are those of the straight-ray model.
@@ -37,7 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .state import HDR, OFF, P_OFF_MAX, P_OFF_SIGMA, STRIDE
+from .state import HDR, OFF, P_OFF_LAPLACE, P_OFF_MAX, P_OFF_SIGMA, STRIDE
 
 __all__ = ['offset_on', 'offset_ok', 'draw_offset', 'offset_logq', 'offset_log_prior',
            'offset_log_const']
@@ -53,9 +60,12 @@ def offset_on(P) -> bool:
 
 @njit(cache=True)
 def draw_offset(P):
-    """A new arm's offset: ``N(0, sigma)`` (0 when the offset is off; nothing drawn)."""
+    """A new arm's offset: ``N(0, sigma)`` or ``Laplace(0, sigma)`` (0 when the offset is
+    off; nothing drawn)."""
     if not offset_on(P):
         return 0.0
+    if P[P_OFF_LAPLACE] > 0.0:
+        return np.random.laplace(0.0, P[P_OFF_SIGMA])
     return np.random.normal() * P[P_OFF_SIGMA]
 
 
@@ -64,6 +74,8 @@ def offset_logq(o, P):
     """log density of a new arm's offset ``o`` under :func:`draw_offset` (0 when off)."""
     if not offset_on(P):
         return 0.0
+    if P[P_OFF_LAPLACE] > 0.0:
+        return -abs(o) / P[P_OFF_SIGMA] - math.log(2.0 * P[P_OFF_SIGMA])
     z = o / P[P_OFF_SIGMA]
     return -0.5 * z * z - math.log(P[P_OFF_SIGMA]) - _LOG_SQRT_2PI
 
@@ -76,11 +88,16 @@ def offset_ok(o, P) -> bool:
 
 @njit(cache=True)
 def offset_log_prior(S, P):
-    """sum over the arms of ``-o_k^2 / (2 sigma^2)`` (the normal's constant: per arm, in
-    :func:`offset_log_const`)."""
+    """sum over the arms of ``-o_k^2 / (2 sigma^2)``, or ``-|o_k| / sigma`` for the
+    Laplace prior (the constant: per arm, in :func:`offset_log_const`)."""
     if not offset_on(P):
         return 0.0
     lp = 0.0
+    if P[P_OFF_LAPLACE] > 0.0:
+        ib = 1.0 / P[P_OFF_SIGMA]
+        for k in range(int(S[2])):
+            lp -= ib * abs(S[HDR + k * STRIDE + OFF])
+        return lp
     iv = 0.5 / (P[P_OFF_SIGMA] * P[P_OFF_SIGMA])
     for k in range(int(S[2])):
         o = S[HDR + k * STRIDE + OFF]
@@ -88,10 +105,13 @@ def offset_log_prior(S, P):
     return lp
 
 
-def offset_log_const(sigma: float, max_offset: float) -> float:
-    """log normalising constant of the truncated normal prior of one arm's offset (0 when
-    off): ``-log(sigma sqrt(2 pi)) - log P(|N(0, sigma)| <= max)``."""
+def offset_log_const(sigma: float, max_offset: float, laplace: bool = False) -> float:
+    """log normalising constant of the truncated prior of one arm's offset (0 when off):
+    normal ``-log(sigma sqrt(2 pi)) - log P(|N(0, sigma)| <= max)``, Laplace
+    ``-log(2 sigma) - log(1 - exp(-max / sigma))``."""
     if max_offset <= 0.0:
         return 0.0
+    if laplace:
+        return -math.log(2.0 * sigma) - math.log(-math.expm1(-max_offset / sigma))
     mass = math.erf(max_offset / (sigma * math.sqrt(2.0)))
     return -math.log(sigma) - _LOG_SQRT_2PI - math.log(mass)

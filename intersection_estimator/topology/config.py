@@ -19,7 +19,7 @@ from ..ranges import check_range
 from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
 from .arm_offset import offset_log_const
 from .refit import log_floor_table
-from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_C_WIDTH,
+from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_C_WIDTH, P_OFF_LAPLACE,
                     P_D2_CUT, P_OFF_MAX, P_OFF_SIGMA, P_OFF_STEP,
                     P_FINE_P, P_FINE_SCALE, P_FLOOR, P_FOCUS, P_FOCUS_P, P_GAP_MAX,
                     P_GAP_STEP, P_LANE_NORM, P_LANE_SUM, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
@@ -59,7 +59,10 @@ RANGES = {
     'gap_max': ('(0, 30]', 'widest median gap [m]'),
     'arm_offset_max': ('[0, 30]', 'largest sideways offset of an arm axis from the center '
                        '(0: arms are rays from the center, paper §II-B) [m]'),
-    'arm_offset_sigma': ('(0, 30]', 'sigma of the normal prior of an arm-axis offset [m]'),
+    'arm_offset_sigma': ('(0, 30]', 'sigma (normal) or scale (Laplace) of the prior of an arm-axis '
+                         'offset [m]'),
+    'arm_offset_prior': (None, "'normal' or 'laplace': the prior of an arm-axis offset "
+                         '(arm_offset.py)'),
     'lane_width': ('[lane_width_min, lane_width_max]', 'lane width of a new arm, and of every '
                    'arm when p_width = 0 [m]'),
     'lane_width_min': ('[1, lane_width_max)', 'narrowest lane [m]'),
@@ -192,6 +195,7 @@ class TopologyConfig:
     gap_max: float = 4.0
     arm_offset_max: float = 0.0
     arm_offset_sigma: float = 2.0
+    arm_offset_prior: str = 'normal'
     lane_width: float = 3.5
     lane_width_min: float = 2.75
     lane_width_max: float = 4.0
@@ -276,6 +280,8 @@ class TopologyConfig:
         _need(self, 'max_lanes', self.max_lanes <= len(self.lane_count_prior) - 1,
               'max_lanes <= len(lane_count_prior) - 1')
         _need(self, 'traffic_side', self.traffic_side in (1, -1), 'one of 1, -1')
+        _need(self, 'arm_offset_prior', self.arm_offset_prior in ('normal', 'laplace'),
+              "one of 'normal', 'laplace'")
         _need(self, 'arm_count_prior', len(self.arm_count_prior) == MAXA + 1
               and min(self.arm_count_prior) >= 0
               and sum(self.arm_count_prior[self.min_arms:self.max_arms + 1]) > 0,
@@ -329,6 +335,7 @@ class TopologyConfig:
         P[P_OFF_MAX] = self.arm_offset_max if self.offset_on else 0.0
         P[P_OFF_STEP] = self.offset_step
         P[P_OFF_SIGMA] = self.arm_offset_sigma
+        P[P_OFF_LAPLACE] = float(self.arm_offset_prior == 'laplace')
         P[P_FLOOR] = self.clutter_floor
         P[P_TRAFFIC] = self.traffic_side
         P[P_D2_CUT] = self.cut_sigma2
@@ -401,7 +408,8 @@ class Tables:
         self.arm_const = arm_log_const(cfg.gap_max, cfg.lane_width_min, cfg.lane_width_max,
                                        cfg.sample_width)
         if cfg.offset_on:
-            self.arm_const += offset_log_const(cfg.arm_offset_sigma, cfg.arm_offset_max)
+            self.arm_const += offset_log_const(cfg.arm_offset_sigma, cfg.arm_offset_max,
+                                               cfg.arm_offset_prior == 'laplace')
         self.log_floor = log_floor_table(
             cfg.clutter_floor, cfg.cut_sigma2 + cfg.lane_norm * math.log(cfg.max_lanes) + 1.0)
 

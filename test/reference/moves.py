@@ -17,7 +17,7 @@ from intersection_estimator.topology.state import (P_C_ARM, P_C_GAP, P_C_LANE, P
                                                    P_C_SHIFT, P_C_WIDTH, P_GAP_MAX, P_GAP_STEP,
                                                    P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
                                                    P_MIN_LANES, P_MIN_SEP, P_OFF_MAX,
-                                                   P_OFF_SIGMA, P_OFF_STEP, P_ROT, P_SAMPLE_W,
+                                                   P_OFF_LAPLACE, P_OFF_SIGMA, P_OFF_STEP, P_ROT, P_SAMPLE_W,
                                                    P_SHIFT, P_SPLIT_SPAN, P_W_MAX, P_W_MIN,
                                                    P_W_STEP, arm_rows)
 
@@ -139,7 +139,10 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
         lq -= math.log(P[P_GAP_MAX])
         if P[P_SAMPLE_W] > 0:
             lq -= math.log(P[P_W_MAX] - P[P_W_MIN])
-        if P[P_OFF_MAX] > 0:     # the new arm's offset, drawn from N(0, sigma)
+        if P[P_OFF_MAX] > 0 and P[P_OFF_LAPLACE] > 0:   # offset from Laplace(0, b)
+            b = P[P_OFF_SIGMA]
+            lq += -abs(new[5]) / b - math.log(2 * b)
+        elif P[P_OFF_MAX] > 0:     # the new arm's offset, drawn from N(0, sigma)
             sig = P[P_OFF_SIGMA]
             lq += -0.5 * (new[5] / sig) ** 2 - math.log(sig * math.sqrt(2 * math.pi))
         return math.log(pm) + lq

@@ -23,18 +23,23 @@ def _one_arm_state(o):
     return pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=0.3, offset=o)]))
 
 
+@pytest.mark.parametrize('kind', ['normal', 'laplace'])
 @pytest.mark.parametrize('sigma,bound', [(2.0, 6.0), (1.0, 1.5), (4.0, 30.0)])
-def test_prior_is_a_normalised_truncated_normal(sigma, bound):
-    P = TopologyConfig(arm_offset_max=bound, arm_offset_sigma=sigma).kernel_params()
-    c = offset_log_const(sigma, bound)
+def test_prior_is_a_normalised_truncated_density(sigma, bound, kind):
+    P = TopologyConfig(arm_offset_max=bound, arm_offset_sigma=sigma,
+                       arm_offset_prior=kind).kernel_params()
+    c = offset_log_const(sigma, bound, kind == 'laplace')
     mass, _ = integrate.quad(lambda o: math.exp(c + offset_log_prior(_one_arm_state(o), P)),
                              -bound, bound)
     assert mass == pytest.approx(1.0, abs=1e-9)
 
 
-def test_new_arm_draw_follows_its_density():
-    """draw_offset samples the normal whose log density offset_logq returns."""
-    P = ON.kernel_params()
+@pytest.mark.parametrize('kind', ['normal', 'laplace'])
+def test_new_arm_draw_follows_its_density(kind):
+    """draw_offset samples the density (normal or Laplace, both with standard deviation
+    sigma * (1 or sqrt 2)) whose log offset_logq returns."""
+    cfg = TopologyConfig(arm_offset_max=6.0, arm_offset_sigma=4.0, arm_offset_prior=kind)
+    P = cfg.kernel_params()
 
     @njit
     def draws(P, n, seed):
@@ -45,9 +50,10 @@ def test_new_arm_draw_follows_its_density():
         return out
 
     x = draws(P, 40000, 5)
-    assert np.std(x) == pytest.approx(ON.arm_offset_sigma, rel=0.02)
-    assert abs(np.mean(x)) < 0.05
-    dens, _ = integrate.quad(lambda o: math.exp(offset_logq(o, P)), -50, 50)
+    sd = cfg.arm_offset_sigma * (math.sqrt(2.0) if kind == 'laplace' else 1.0)
+    assert np.std(x) == pytest.approx(sd, rel=0.02)
+    assert abs(np.mean(x)) < 4.0 * sd / math.sqrt(len(x))      # 4 standard errors
+    dens, _ = integrate.quad(lambda o: math.exp(offset_logq(o, P)), -400, 400, points=[0.0], limit=200)
     assert dens == pytest.approx(1.0, abs=1e-9)
 
 

@@ -233,3 +233,19 @@ def test_focused_arm_moves_change_the_focus_arm_and_stay_symmetric(S, kind, seed
         assert all(HDR + focus * STRIDE <= i < HDR + (focus + 1) * STRIDE for i in changed)
     else:
         assert 0 <= k < n
+
+
+P_LAPLACE = Tables(TopologyConfig(arm_offset_max=OFF_MAX, arm_offset_prior='laplace')).P
+
+
+@SET
+@given(states(OFF_MAX), st.integers(0, 2 ** 31 - 2))
+def test_add_arm_ratio_with_the_laplace_offset_prior(S, seed):
+    """The add-arm move's log ratio with the Laplace offset draw is the reverse removal's
+    proposal density over the forward one's, under the same prior kind."""
+    ok, lq, S2 = propose_move(S, ADD_ARM, P_LAPLACE, TAB.logqn, seed)
+    if not ok:
+        return
+    expect = (proposal_log_density(S2, S, REMOVE_ARM, P_LAPLACE, TAB.logqn)
+              - proposal_log_density(S, S2, ADD_ARM, P_LAPLACE, TAB.logqn))
+    assert abs(lq - expect) < 1e-9
