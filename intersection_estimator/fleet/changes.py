@@ -260,14 +260,48 @@ def _pair_lanes(est_l, map_l) -> dict[int, int]:
     return {int(i): int(j) for i, j in zip(r, c)}
 
 
+def _lane_identity(e, m, est_lanes, mapped) -> dict:
+    """``{(direction, estimated lane_index): mapped lane index}`` of estimated arm ``e`` and
+    mapped arm ``m``: which mapped lane an estimated lane *is*, by position, not by index.
+
+    An estimated lane is a mapped lane when each is the other's nearest (mean center-line
+    distance, :func:`lane_distance`), the estimated lane's nearest taken over the mapped
+    arm's lanes of *both* directions. Lanes of one road do not overlap, so an estimated lane
+    nearer another mapped lane than its own lies in that lane's space: its index says nothing
+    about which mapped lane it is. The estimator makes exactly this error in short drives
+    (an empty lane added on one side of a direction and its lanes shifted by one, the lane
+    count unchanged): paired by index, the shifted lanes read as "moved" by a lane width and
+    their turns as turns the map lacks (docs/fleet.md, rule 6)."""
+    marm = mapped.arms[m]
+    ml = [(d, j, l) for d in (ENTERING, LEAVING) for j, l in enumerate(marm.lanes(d))]
+    out = {}
+    for d in (ENTERING, LEAVING):
+        el = est_lanes.get((e, d), [])
+        if not el or not ml:
+            continue
+        cost = np.array([[lane_distance(x.center, y.center) for _, _, y in ml] for x in el])
+        cost[~np.isfinite(cost)] = np.inf
+        for i, x in enumerate(el):
+            if not np.isfinite(cost[i]).any():
+                continue
+            c = int(np.argmin(cost[i]))
+            dm, j, _ = ml[c]
+            if dm == d and int(np.argmin(cost[:, c])) == i:
+                out[(d, x.lane_index)] = j
+    return out
+
+
 def _with_traffic(el) -> list:
     """Estimated lanes a vehicle drove (``support``; all of them when the estimate carries no
     support, e.g. raw radar input)."""
     return [l for l in el if l.support > 0] if any(l.support > 0 for l in el) else list(el)
 
 
-def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen=None, lane_conf=None) -> list:
+def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen=None, lane_conf=None,
+                   ident=None) -> list:
     out = []
+    if ident is None:
+        ident = _lane_identity(e, m, lanes, mapped)
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
         ml, el, ds = marm.lanes(d), lanes.get((e, d), []), DIRS[d]
@@ -300,7 +334,12 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
                                     cfg, map_arm=m, direction=ds, map_lanes=[g], evidence=ev))
         else:
             counts_ok.add((m, ds))
-            for k, (el_k, ml_k) in enumerate(zip(el, ml)):
+            # the mapped lane each estimated lane is by position (not its index: a lane in
+            # another mapped lane's space has not "moved" there, _lane_identity)
+            for k, el_k in enumerate(el):
+                if (d, el_k.lane_index) not in ident:
+                    continue
+                ml_k = ml[ident[(d, el_k.lane_index)]]
                 dist = lane_distance(el_k.center, ml_k.center)
                 if math.isfinite(dist) and dist > cfg.moved_m:
                     # as sure as the estimated lane's course: the vehicles that drove it
@@ -312,7 +351,10 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
     return out
 
 
-def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_ok, used) -> list:
+def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_ok, used, ident) -> list:
+    """Turns in *mapped* lane indices: an estimated connector's entering and leaving lanes are
+    the mapped lanes they lie on (``ident``, :func:`_lane_identity`); a turn from or to an
+    estimated lane that is no mapped lane cannot be placed and shows nothing."""
     out, keys = [], {c.key: c for c in mapped.connectors}
     seen = set()
     for l in lanes_by_id.values():
@@ -322,7 +364,10 @@ def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_o
         nxt = lanes_by_id.get(l.successors[0])
         if nxt is None or (a, 'in') not in counts_ok or (b, 'out') not in counts_ok:
             continue
-        key = (a, l.lane_index, b, nxt.lane_index)
+        i, j = ident.get(l.arm, {}).get((ENTERING, l.lane_index)), ident.get(l.arm_to, {}).get((LEAVING, nxt.lane_index))
+        if i is None or j is None:
+            continue
+        key = (a, i, b, j)
         seen.add(key)
         if key in keys:
             used.add(keys[key].id)
@@ -357,9 +402,11 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveV
     findings = _arm_findings(est, mapped, amap, conf, pas, cfg)
     lanes, by_id = _est_lanes(lanelets)
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
+    ident = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
     for e, m in sorted(amap.items()):
-        findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf)
-    findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used)
+        findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
+                                   ident[e])
+    findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used, ident)
     total = float(sum(pas))
     weak = sorted((f for f in findings if f.confidence <= 0.5), key=lambda f: f.key)
     return DriveView(intersection=mapped.id, findings=sorted((f for f in findings if f.confidence > 0.5),
