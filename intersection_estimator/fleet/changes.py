@@ -144,12 +144,20 @@ class DriveView:
             return 1.0 / (1.0 + math.exp(-min(self.no_new_arm_llr, 50.0)))
         ok = (f.map_arm, f.direction) in self.counts_ok       # the drive saw the mapped lanes
         seen = self.arm_conf.get(f.map_arm, 0.0)
+        # Traffic on an element refutes its absence whatever the arm's confidence: the
+        # confidence 1 - exp(-passages / 3) says how much traffic the arm explains, not
+        # whether that traffic is real. Measured on short drives (Table I cases 2000-2019,
+        # 10 drives of 30 %): no estimated arm without a world arm (0 of 847), a lane the
+        # world lacks "driven" in 1 of 194 drives (0 of 24 on arms <= 0.5), real lanes
+        # driven in 57 % of the drives on arms <= 0.5 (72 % above). The old gate (arm > 0.5)
+        # let the drives that saw a quiet arm or lane count nothing while every drive that
+        # missed it added its absence evidence (docs/fleet.md, rule 7).
         if f.kind == 'arm_removed':
-            return P_MAX if seen > 0.5 else 0.0
+            return P_MAX if f.map_arm in self.arm_conf else 0.0
         if f.kind == 'lane_removed':
             # the drive's vehicles drove the mapped lane(s) the finding says are gone
             there = bool(f.map_lanes) and all(l in self.lanes_seen for l in f.map_lanes)
-            return P_MAX if (there or ok) and seen > 0.5 else 0.0
+            return P_MAX if there or (ok and seen > 0.5) else 0.0
         if f.kind == 'lane_moved':         # as well as this drive saw that lane (its vehicles)
             return min(seen, self.lane_conf.get(f.map_lanes[0], seen)) if ok and f.map_lanes else 0.0
         if f.kind == 'lane_added':         # only a drive with the mapped count
@@ -309,8 +317,10 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
         pair = _pair_lanes(el, ml)
         has_support = any(l.support > 0 for l in lanes.get((e, ENTERING), []) + lanes.get((e, LEAVING), []))
         if lanes_seen is not None:
-            driven = {id(l) for l in _with_traffic(el)}
-            lanes_seen.update(ml[j].id for i, j in pair.items() if id(el[i]) in driven)
+            # the mapped lanes the drive's vehicles drove: estimated lanes with traffic that
+            # *are* that lane by position (_lane_identity; the Hungarian pair also joins lanes
+            # a lane width or more apart)
+            lanes_seen.update(ml[ident[(d, l.lane_index)]].id for l in _with_traffic(el) if (d, l.lane_index) in ident)
         if lane_conf is not None:
             # per-vehicle evidence of the lane's course, as a probability: logit = support / 3
             lane_conf.update({ml[j].id: (1.0 / (1.0 + math.exp(-el[i].support / 3.0)) if has_support else conf[e])
