@@ -17,6 +17,10 @@ Change kinds say how the *world* differs from the map:
                           through its entering lane (an absence; "unused", not "removed")
 ========================  =====================================================================
 
+Lanes are identified by position: an estimated lane is the mapped lane it lies on (mutual
+nearest center lines, :func:`_lane_identity`), not the mapped lane with its index; lane
+moved, the turns' keys and the lanes a drive drove use that identity.
+
 Evidence is the vehicle passages each estimated arm explains: the topology estimator
 reports an arm's confidence as ``1 - exp(-passages / 3)`` (:mod:`intersection_estimator.topology`),
 so ``passages = -3 ln(1 - confidence)``. A positive finding's log likelihood ratio is
@@ -33,7 +37,8 @@ ratio "gone : still there" is ``-P ln(1 - f)``, added to the prior log odds
 With ``share_concentration`` k > 0 the share itself varies between elements
 (``Beta(k f, k (1 - f))``) and the likelihood is ``B(a, b + P) / B(a, b)`` (:func:`_absence`).
 A missing lane is one finding per mapped lane (key = its id); a drive whose vehicles drove
-that lane refutes it (``DriveView.lanes_seen``).
+that lane refutes it (``DriveView.lanes_seen``), and a drive that matched a mapped arm
+refutes its removal, whatever the arm's confidence (:meth:`DriveView.contradiction`).
 A mapped connector is only judged when the drive's vehicles left its entering lane through
 another connector to a matched arm; its passages are the turns seen from that lane (a
 lower bound: one vehicle each). A drive claims an absence
