@@ -172,3 +172,27 @@ def test_added_arm_contradicted_by_absence_evidence(tmp_path, cases):
     assert view.no_new_arm_llr == pytest.approx(llr)
     q = view.contradiction(Finding('arm_added', 'arm_added:after0', 0.9, 0))
     assert q == pytest.approx(1 / (1 + np.exp(-llr))) and q < view.total_conf
+
+
+def test_lane_identity_is_by_position_not_index(tmp_path, cases):
+    """An estimated lane is the mapped lane it lies on, not the one with its index: the same
+    lanes with the lane indices of one entering direction rotated by one (the short drives'
+    estimator error: lanes shifted by one index, count unchanged) show no change against the
+    unchanged map. Paired by index (the old rule) they read as lanes moved by a lane width
+    and their turns as turns the map lacks."""
+    from intersection_estimator.fleet.match import match_arms
+    sc, r = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    assert compare(r.intersection, r.lanelets, X).findings == []
+    amap = match_arms([a.angle for a in r.intersection.arms], [a.angle for a in X.arms])
+    # an estimated arm whose entering direction has >= 2 lanes, with turns from it
+    e = next(e for e in sorted(amap) if r.intersection.arms[e].lanes_in >= 2)
+    n = r.intersection.arms[e].lanes_in
+    lanes = copy.deepcopy(r.lanelets)
+    rot = {k: (k + 1) % n for k in range(n)}
+    for l in lanes:
+        if l.arm == e and l.kind in ('entering', 'connector'):
+            l.lane_index = rot[l.lane_index]
+    view = compare(r.intersection, lanes, X)
+    assert view.findings == [], [f.key for f in view.findings]
+    assert view.used == compare(r.intersection, r.lanelets, X).used

@@ -118,3 +118,30 @@ def test_lane_moved_contradicted_by_the_vehicles_that_saw_the_lane():
     show = _moved(1 / (1 + math.exp(-1.0)))                    # log LR 1
     assert fuse([('a', _view([show])), ('b', few)])['X1'].changes[0].evidence['log_odds'] == pytest.approx(1 - 1 / 3)
     assert fuse([('a', _view([show])), ('b', many)])['X1'].changes == []
+
+
+def test_traffic_on_a_quiet_arm_or_lane_refutes_its_absence():
+    """A drive that matched the mapped arm, or whose vehicles drove the mapped lane, refutes
+    its removal whatever the arm's confidence (here 0.49 = 2 passages): the confidence says
+    how much traffic the arm explains, not whether it is real. The old gate (arm > 0.5) let
+    those drives count nothing while each drive that missed the arm or lane added its
+    absence evidence."""
+    from intersection_estimator.fleet.changes import _absence
+    cfg = ChangeConfig()
+    gone_arm = _absence('arm_removed', 'arm_removed:1', 16.0, 0.25, cfg, map_arm=1, map_lanes=['5', '6'])
+    gone_lane = _missing('9', passages=6.0)
+    assert gone_arm.confidence > 0.5 and gone_lane.confidence > 0.5
+    views = []
+    for d in range(3):                                  # three drives miss both
+        v = _view()
+        del v.arm_conf[1]
+        v.findings = [gone_arm, gone_lane]
+        views.append((f'miss{d}', v))
+    for d in range(3):                                  # three drives saw them, on a quiet arm
+        v = _view(arm_conf=0.49)
+        v.counts_ok.discard((0, 'in'))
+        v.lanes_seen = {'9'}
+        views.append((f'saw{d}', v))
+    X = fuse(views, cfg)['X1']
+    assert X.changes == [], [(c.key, c.confidence) for c in X.changes]
+    assert all(c.evidence['drives_contradicting'] == 3 for c in X.candidates)
