@@ -61,6 +61,8 @@ RANGES = {
                        '(0: arms are rays from the center, paper §II-B) [m]'),
     'arm_offset_sigma': ('(0, 30]', 'sigma (normal) or scale (Laplace) of the prior of an arm-axis '
                          'offset [m]'),
+    'arm_offset_tracks_only': (None, 'the arm-axis offset only for windows with tracked objects '
+                               '(radar / heading voxels are too coarse to place it)'),
     'arm_offset_prior': (None, "'normal' or 'laplace': the prior of an arm-axis offset "
                          '(arm_offset.py)'),
     'lane_width': ('[lane_width_min, lane_width_max]', 'lane width of a new arm, and of every '
@@ -193,9 +195,10 @@ class TopologyConfig:
     min_lanes: int = 1
     max_lanes: int = 6
     gap_max: float = 4.0
-    arm_offset_max: float = 0.0
-    arm_offset_sigma: float = 2.0
-    arm_offset_prior: str = 'normal'
+    arm_offset_max: float = 6.0
+    arm_offset_sigma: float = 1.0
+    arm_offset_prior: str = 'laplace'
+    arm_offset_tracks_only: bool = True
     lane_width: float = 3.5
     lane_width_min: float = 2.75
     lane_width_max: float = 4.0
@@ -350,7 +353,8 @@ class TopologyConfig:
 
 
 _MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width', 'p_offset')
-_FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction', 'trim_longest')
+_FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction', 'trim_longest',
+          'arm_offset_tracks_only')
 
 
 def _check_flags(cfg) -> None:

@@ -19,6 +19,7 @@ estimate leaves out arms without support (:mod:`.support`).
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 import time
 
@@ -34,7 +35,7 @@ from .mcmc import Posterior, acceptance_rates, new_work, temperatures
 from .moves import MOVE_NAMES
 from .preprocess import preprocess, radar_rows
 from .refit import refit_chain
-from .state import CX, CY, Chain, arm_angles, pack_state, unpack_state
+from .state import CX, CY, HDR, MAXA, OFF, STRIDE, Chain, arm_angles, pack_state, unpack_state
 from .support import reported
 
 __all__ = ['TopologyEstimator']
@@ -55,7 +56,12 @@ class TopologyEstimator:
         #: slower, the samples are the same)
         self.audit = bool(audit)
         self._rng = _as_rng(seed)
-        self._tables = Tables(self.cfg)
+        self._tables_all = Tables(self.cfg)
+        #: the tables without the arm-axis offset, for windows without tracked objects
+        #: when ``arm_offset_tracks_only`` (:mod:`.arm_offset`)
+        self._tables_plain = (Tables(replace(self.cfg, arm_offset_max=0.0))
+                              if self.cfg.offset_on and self.cfg.arm_offset_tracks_only
+                              else self._tables_all)
         self._pcfg = self.cfg.preprocess_config()
         self.reset()
 
@@ -93,6 +99,8 @@ class TopologyEstimator:
         if not self._chains:
             self._initialise()
             return
+        if self._tables is not self._tables_all:
+            self._drop_offsets()
         self._preprocess(self._best_chain().best_S[CX:CY + 1].copy())
         for c in self._chains:
             c.step = min(c.step, int(self.cfg.reheat_fraction * self.cfg.anneal_samples))
@@ -237,6 +245,19 @@ class TopologyEstimator:
     def _posterior(self, obs: ObservationSet) -> Posterior:
         """The posterior on ``obs``, counting its chains' work in ``work['chain']``."""
         return Posterior(self._tables, obs, self.work['chain'], self.audit)
+
+    def _drop_offsets(self) -> None:
+        """Arms through the center again (the window lost its tracked objects, so the
+        offset is no longer part of the model, ``arm_offset_tracks_only``)."""
+        for c in self._chains:
+            for S in (c.S, c.best_S):
+                S[HDR + OFF:HDR + MAXA * STRIDE:STRIDE] = 0.0
+
+    @property
+    def _tables(self) -> Tables:
+        """The kernel tables for the current window: with the arm-axis offset only when
+        the window has tracked objects or the offset is not limited to them."""
+        return self._tables_all if self._dets.has_tracks else self._tables_plain
 
     def _preprocessed(self, center, angles) -> ObservationSet:
         t = time.perf_counter()

@@ -1,6 +1,7 @@
 """Arm-axis offset (beyond the paper, topology/arm_offset.py): prior, proposal, off = the
 straight-ray model, and an offset arm recovered from its traffic."""
 
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -12,9 +13,9 @@ from intersection_estimator.model import Arm, Intersection
 from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.arm_offset import (draw_offset, offset_log_const,
                                                         offset_log_prior, offset_logq)
-from intersection_estimator.topology.state import HDR, OFF, P_C_WIDTH, pack_state
+from intersection_estimator.topology.state import HDR, OFF, P_C_WIDTH, P_OFF_MAX, pack_state
 
-from .scenes import same_topology, scene
+from .scenes import easy_intersection, same_topology, scene
 
 ON = TopologyConfig(arm_offset_max=6.0, arm_offset_sigma=4.0)
 
@@ -58,9 +59,9 @@ def test_new_arm_draw_follows_its_density(kind):
 
 
 def test_off_draws_nothing_and_never_picks_the_move():
-    """Off (the default): no random number is consumed, offsets stay 0, the move's
+    """Off (arm_offset_max 0): no random number is consumed, offsets stay 0, the move's
     cumulative probability ends at the width move, the prior adds nothing."""
-    P = TopologyConfig().kernel_params()
+    P = TopologyConfig(arm_offset_max=0.0).kernel_params()
     assert P[P_C_WIDTH] == 1.0
 
     @njit
@@ -134,7 +135,31 @@ def test_arms_through_the_center_stay_on_their_traffic():
 
 
 def test_estimates_off_have_zero_offsets():
-    best = _estimate(TopologyConfig(), scene(_staggered(3.5), 'tracked', seed=2))
+    best = _estimate(TopologyConfig(arm_offset_max=0.0), scene(_staggered(3.5), 'tracked', seed=2))
     assert all(a.offset == 0.0 for a in best.arms)
     S = pack_state(best)
     assert np.all(S[HDR + OFF::6][:len(best.arms)] == 0.0)
+
+
+def test_offset_is_for_tracked_windows_only_by_default():
+    """``arm_offset_tracks_only``: a radar window gets the straight-ray tables (no offset
+    move, no prior term); a tracked window the offset; a window that loses its tracks
+    drops the chains' offsets."""
+    cfg = TopologyConfig(arm_offset_max=6.0, arm_offset_prior='laplace', arm_offset_sigma=1.0)
+    inter = easy_intersection()
+    tracked, raw = scene(inter, 'tracked', seed=3), scene(inter, 'raw', seed=3)
+    est = TopologyEstimator(cfg, seed=1)
+    est.set_observations(tracked)
+    assert est._tables.P[P_OFF_MAX] == 6.0
+    est.run(n_samples=1500)
+    for c in est._chains:                  # an offset arm, whatever the chain found
+        c.S[HDR + OFF] = c.best_S[HDR + OFF] = 1.5
+    assert est.best.arms[0].offset != 0.0 or any(a.offset == 1.5 for a in est.best.arms)
+    est.set_observations(raw)
+    assert est._tables.P[P_OFF_MAX] == 0.0
+    assert all(a.offset == 0.0 for a in est.best.arms)
+    est.run(n_samples=500)
+    assert all(a.offset == 0.0 for a in est.best.arms)
+    both = TopologyEstimator(replace(cfg, arm_offset_tracks_only=False), seed=1)
+    both.set_observations(raw)
+    assert both._tables.P[P_OFF_MAX] == 6.0

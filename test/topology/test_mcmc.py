@@ -14,7 +14,8 @@ from reference.likelihood import log_likelihood_reference
 
 from .scenes import easy_intersection, scene
 
-CFG = TopologyConfig()
+# the paper's chain (straight rays): the arm-axis offset has its own tests (test_arm_offset)
+CFG = TopologyConfig(arm_offset_max=0.0)
 TAB = Tables(CFG)
 
 
