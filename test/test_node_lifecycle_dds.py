@@ -25,13 +25,23 @@ class Lifecycle:
     def ready(self) -> bool:
         return self.change.service_is_ready() and self.get.service_is_ready()
 
-    def _call(self, client, request, timeout: float = 120.0):
-        future = client.call_async(request)
-        assert wait_for(future.done, timeout, self.spin), f'{client.srv_name}: no answer in {timeout} s'
-        return future.result()
+    def _call(self, client, request, timeout: float = 120.0, attempt: float | None = None):
+        """One request, answered within ``timeout``; with ``attempt`` (idempotent requests
+        only) re-sent every ``attempt`` seconds until then: Fast DDS can drop the answer to
+        a request sent right after the service was discovered, when the server's response
+        writer has not yet matched our response reader (ros2/rmw_fastrtps#392, #842)."""
+        per = timeout if attempt is None else attempt
+        waited = 0.0
+        while waited < timeout:
+            future = client.call_async(request)
+            if wait_for(future.done, per, self.spin):
+                return future.result()
+            client.remove_pending_request(future)
+            waited += per
+        raise AssertionError(f'{client.srv_name}: no answer in {timeout} s')
 
     def state(self) -> int:
-        return self._call(self.get, self.GetState.Request()).current_state.id
+        return self._call(self.get, self.GetState.Request(), attempt=10.0).current_state.id
 
     def transition(self, transition_id: int) -> bool:
         req = self.ChangeState.Request()
