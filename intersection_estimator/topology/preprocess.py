@@ -72,11 +72,12 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
         if len(starts) == 0:
             return ObservationSet.empty()
     c = np.asarray(center, float)
-    track_label = lab[starts]
     if math.isfinite(cfg.track_radius):   # parts made of the rows near the box only
-        starts, ends, tid, xy, hd = _rows_within(c, cfg.track_radius, starts, ends, tid, xy, hd)
+        starts, ends, tid, xy, hd, lab = _rows_within(c, cfg.track_radius, starts, ends, tid, xy,
+                                                      hd, lab)
         if len(starts) == 0:
             return ObservationSet.empty()
+    track_label = lab[starts]             # per track of the bounds split_tracks reads
     if not np.isfinite(hd).all():      # rows without heading: direction from positions
         for a, b in zip(starts, ends):
             h = hd[a:b]
@@ -116,16 +117,16 @@ def _part_sigma(track_label, part_track, cfg: PreprocessConfig) -> np.ndarray:
     return sig
 
 
-def _rows_within(c, radius: float, starts, ends, tid, xy, hd):
+def _rows_within(c, radius: float, starts, ends, tid, xy, hd, lab):
     """The rows of the kept tracks within ``radius`` of ``c`` (track order kept), and the
-    new track bounds."""
+    new track bounds (a track with no row within ``radius`` is gone)."""
     keep = np.zeros(len(tid), bool)
     for a, b in zip(starts, ends):
         keep[a:b] = True
     keep &= np.hypot(xy[:, 0] - c[0], xy[:, 1] - c[1]) <= radius
-    tid, xy, hd = tid[keep], xy[keep], hd[keep]
+    tid, xy, hd, lab = tid[keep], xy[keep], hd[keep], lab[keep]
     starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]]) if len(tid) else np.zeros(0, np.int64)
-    return starts, np.r_[starts[1:], len(tid)].astype(np.int64), tid, xy, hd
+    return starts, np.r_[starts[1:], len(tid)].astype(np.int64), tid, xy, hd, lab
 
 
 def _path_heading(p: np.ndarray) -> np.ndarray:

@@ -154,3 +154,23 @@ def test_cyclist_parts_get_the_weak_sigma():
     bike = tracked_observations(_dets(x, y, h, s, e, label=6), (0.0, 0.0), cfg)
     assert len(car) == len(bike) > 0
     assert np.all(car.sigma == 0.8) and np.all(bike.sigma == 2.5)
+
+
+def test_weak_sigma_follows_its_track_when_another_track_is_out_of_range():
+    """A moving car seen only beyond ``track_radius`` leaves no part; the cyclist after it
+    (higher track id) must still get ``sigma_track_weak``, the car after that ``sigma_track``
+    (labels stay with their tracks when the radius drops a whole track)."""
+    x, y, h, s, e, _ = _leaving_tracks(0.0, lanes=(-1.75,), per_lane=1)
+    n = len(x)
+    far = np.column_stack([np.arange(200.0, 200.0 + n), np.full(n, 40.0)])   # > 75 m out
+    xy = np.concatenate([far, np.column_stack([x, y]), np.column_stack([x, y - 3.5])])
+    tid = np.repeat([0, 1, 2], n)
+    label = np.repeat([1, 6, 1], n)
+    t = np.tile(np.arange(n) * 0.1, 3)
+    dets = Detections.make(xy, t=t, heading=np.tile(h, 3), track_id=tid,
+                           speed=np.full(3 * n, 10.0), label=label)
+    cfg = TopologyConfig(sigma_track=0.8, sigma_track_weak=2.5).preprocess_config()
+    obs = tracked_observations(dets, (0.0, 0.0), cfg)
+    assert len(obs) == 2                                   # one leaving part per near track
+    bike = np.argmax(obs.y)                                # the cyclist's lane is y = -1.75
+    assert obs.sigma[bike] == 2.5 and obs.sigma[1 - bike] == 0.8
