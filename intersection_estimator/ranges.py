@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import re
 
-__all__ = ['check_range', 'check_table']
+import numpy as np
+
+__all__ = ['check_range', 'check_table', 'check_labels']
 
 _INTERVAL = re.compile(r'^([\[(])\s*([^,]+?)\s*,\s*([^\]\)]+?)\s*([\])])$')
 
@@ -42,3 +44,12 @@ def check_table(cfg, table: dict, label: str | None = None) -> None:
     """:func:`check_range` for every entry of ``table`` (name -> (interval, meaning))."""
     for name, (interval, what) in table.items():
         check_range(cfg, name, interval, what, label)
+
+
+def check_labels(cfg, name: str, label: str | None = None) -> None:
+    """Raise ValueError unless ``cfg.<name>`` is a tuple of integer classification labels
+    (``bool`` is not one)."""
+    v = getattr(cfg, name)
+    if not (isinstance(v, tuple) and all(isinstance(x, (int, np.integer)) and not isinstance(x, bool)
+                                         for x in v)):
+        raise ValueError(f'{label or type(cfg).__name__}.{name}={v!r}: needs a tuple of integer labels')

@@ -310,11 +310,11 @@ def _with_traffic(el) -> list:
     return [l for l in el if l.support > 0] if any(l.support > 0 for l in el) else list(el)
 
 
-def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen=None, lane_conf=None,
-                   ident=None) -> list:
+def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
+                   ident) -> list:
+    """Lane findings of estimated arm ``e`` against mapped arm ``m``; ``ident``: that arm
+    pair's :func:`_lane_identity`."""
     out = []
-    if ident is None:
-        ident = _lane_identity(e, m, lanes, mapped)
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
         ml, el, ds = marm.lanes(d), lanes.get((e, d), []), DIRS[d]

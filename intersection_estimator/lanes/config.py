@@ -4,10 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-import numpy as np
-
-
-from ..ranges import check_table
+from ..ranges import check_labels, check_table
 
 __all__ = ['LaneConfig']
 
@@ -188,11 +185,7 @@ class LaneConfig:
     def validate(self) -> 'LaneConfig':
         """Raise ``ValueError`` naming the first parameter outside its allowed range."""
         check_table(self, {f.name: _RANGES[f.name] for f in fields(self)})
-        if not (isinstance(self.skip_labels, tuple)
-                and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                        for v in self.skip_labels)):
-            raise ValueError(f'LaneConfig.skip_labels={self.skip_labels!r}: needs a tuple of '
-                             'integer labels')
+        check_labels(self, 'skip_labels')
         if self.arm_length_min > self.arm_length_max:
             raise ValueError('LaneConfig.arm_length_min must be <= arm_length_max')
         if self.stop_min > self.stop_max:

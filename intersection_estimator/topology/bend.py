@@ -34,6 +34,7 @@ import math
 
 import numpy as np
 from numba import njit
+from scipy.spatial import cKDTree
 
 __all__ = ['part_arms', 'bend_profile', 'unbend', 'straighten']
 
@@ -175,7 +176,6 @@ def unbend(px, py, ph, q0, beta0, centres, dphi, reach: float):
     ax = q0[0] + np.cumsum(np.r_[0.0, _STEP * np.cos(bm[1:])])
     ay = q0[1] + np.cumsum(np.r_[0.0, _STEP * np.sin(bm[1:])])
     tx, ty = np.cos(beta), np.sin(beta)
-    from scipy.spatial import cKDTree
     _, i = cKDTree(np.column_stack([ax, ay])).query(np.column_stack([px, py]))
     dx, dy = px - ax[i], py - ay[i]
     t = tau[i] + dx * tx[i] + dy * ty[i]              # arc length of the foot point

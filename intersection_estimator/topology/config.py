@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ..ranges import check_range
+from ..ranges import check_labels, check_range
 from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
 from .arm_offset import offset_log_const
 from .refit import log_floor_table
@@ -293,9 +293,7 @@ class TopologyConfig:
               and sum(self.lane_count_prior[self.min_lanes:self.max_lanes + 1]) > 0,
               'non-negative probabilities with mass on [min_lanes, max_lanes]')
         _check_flags(self)
-        _need(self, 'weak_labels', isinstance(self.weak_labels, tuple)
-              and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-                      for v in self.weak_labels), 'a tuple of integer labels')
+        check_labels(self, 'weak_labels')
         return self
 
     @property

@@ -69,6 +69,7 @@ class TopologyEstimator:
     def reset(self) -> None:
         """Forget observations and chains."""
         self._dets = Detections.empty()
+        self._tracked = False                  # self._dets.has_tracks, read per chunk
         self._radar = None                     # radar_rows(self._dets), made on first use
         #: likelihood work counters of the chains and of the descents
         #: (:data:`.mcmc.WORK_FIELDS`), since the reset; read by :mod:`.cost_model`
@@ -94,6 +95,7 @@ class TopologyEstimator:
     def set_observations(self, dets: Detections) -> None:
         """Replace the observation window; keep the chains (warm start, re-heated)."""
         self._dets = dets.finite()
+        self._tracked = self._dets.has_tracks
         self._radar = None
         self._since_data = 0
         if not self._chains:
@@ -213,7 +215,7 @@ class TopologyEstimator:
         if init is None:
             return
         S, obs, obs_center = init
-        n = cfg.chains_tracked if self._dets.has_tracks else cfg.chains
+        n = cfg.chains_tracked if self._tracked else cfg.chains
         self._chains = [Chain.start(S, 0, len(MOVE_NAMES)) for _ in range(n)]
         self._polish_left = cfg.polish_samples
         near = np.hypot(*(S[CX:CY + 1] - obs_center)) <= cfg.recenter_threshold
@@ -257,7 +259,7 @@ class TopologyEstimator:
     def _tables(self) -> Tables:
         """The kernel tables for the current window: with the arm-axis offset only when
         the window has tracked objects or the offset is not limited to them."""
-        return self._tables_all if self._dets.has_tracks else self._tables_plain
+        return self._tables_all if self._tracked else self._tables_plain
 
     def _preprocessed(self, center, angles) -> ObservationSet:
         t = time.perf_counter()
