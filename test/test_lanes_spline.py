@@ -120,3 +120,71 @@ def test_traffic_connector_needs_two_stations_per_lane():
 def test_bad_switch_value_is_named():
     with pytest.raises(ValueError, match='connector_traffic'):
         replace(LaneConfig(), connector_traffic=2).validate()
+
+
+# ---------------------------------------------------------------- the compiled fit
+def _knots(n):
+    return np.r_[[0.0] * 3, np.linspace(0.0, 1.0, n - 2), [1.0] * 3]
+
+
+def test_compiled_curve_is_scipys_bspline():
+    from scipy.interpolate import BSpline
+    from intersection_estimator.lanes.spline import _evaluate
+    rng = np.random.default_rng(3)
+    for n in (5, 9, 23):
+        ctrl, knots = rng.normal(0, 10, (n, 2)), _knots(n)
+        us = np.r_[0.0, rng.uniform(0, 1, 50), 1.0]
+        assert np.allclose(_evaluate(ctrl, knots, us), BSpline(knots, ctrl, 3)(us), atol=1e-10)
+
+
+def test_compiled_fit_equals_the_least_squares_it_replaced():
+    """One penalty, parameters fixed (no foot-point rounds): the compiled normal equations
+    give the control points of the scipy design matrix + lstsq reference."""
+    from reference.spline import solve_reference
+    rng = np.random.default_rng(4)
+    truth = _ellipse_turn()
+    c0, c1 = truth[0], truth[-1]
+    t0, t1 = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    pieces = connector_pieces(_noisy_runs(truth, rng, noise=0.7), c0, c1)
+    for smooth in (0.1, 1.0, 10.0):
+        ctrl, knots = fit_connector(pieces, c0, t0, c1, t1, smooth=smooth, iters=0)
+        Q = np.concatenate(pieces)
+        u = np.concatenate([p_ / p_[-1] for p_ in
+                            (np.r_[0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
+                             for p in pieces)])
+        ref = solve_reference(Q, u, knots, c0, t0, c1, t1, smooth)
+        assert np.allclose(ctrl, ref, atol=1e-6), (smooth, np.abs(ctrl - ref).max())
+
+
+def _hairpin(r=4.0, n=120):
+    """A tight 150 deg turn (radius 4 m) between two straight 8 m runs."""
+    phi = np.linspace(0.0, np.radians(150), n)
+    arc = np.stack([r * np.sin(phi), r - r * np.cos(phi)], axis=1)
+    d_out = np.array([np.cos(np.radians(150)), np.sin(np.radians(150))])
+    lead = np.stack([np.linspace(-8, 0, 30, endpoint=False), np.zeros(30)], axis=1)
+    tail = arc[-1] + np.linspace(0, 8, 30)[1:, None] * d_out
+    return np.concatenate([lead, arc, tail]), d_out
+
+
+def test_the_traffic_picks_the_penalty():
+    """A tight turn seen with little noise gets a weak penalty (the strongest alone cuts the
+    corner); a gentle arc seen through 1 m of noise a strong one (the weakest alone follows
+    the noise). The choice is the traffic's, the candidates are the same."""
+    grid = np.geomspace(0.1, 10.0, 3)
+    rng = np.random.default_rng(5)
+    hp, d_out = _hairpin()
+    c0, c1 = hp[0], hp[-1]
+    pieces = connector_pieces(_noisy_runs(hp, rng, runs=3, noise=0.15, step=0.5), c0, c1)
+    err = {}
+    for name, kw in (('strong', dict(smooth=10.0)), ('chosen', dict(smooth_grid=grid))):
+        ctrl, knots = fit_connector(pieces, c0, [1, 0], c1, d_out, **kw)
+        err[name] = lane_distance(sample_curve(ctrl, knots, 0.5, 6)[0], hp)
+    assert err['chosen'] < 0.5 * err['strong'], err
+    truth = _ellipse_turn(a=30.0, b=20.0)
+    c0, c1 = truth[0], truth[-1]
+    pieces = connector_pieces(_noisy_runs(truth, rng, runs=2, noise=1.0), c0, c1)
+    err = {}
+    for name, kw in (('weak', dict(smooth=0.1)), ('chosen', dict(smooth_grid=grid))):
+        ctrl, knots = fit_connector(pieces, c0, [1, 0], c1, [0, 1], **kw)
+        err[name] = lane_distance(sample_curve(ctrl, knots, 0.5, 6)[0], truth)
+    assert err['chosen'] < err['weak'], err

@@ -19,7 +19,12 @@ _RANGES = {
                               'B-spline least squares), the arc/straight start only without it'),
     'traffic_presmooth': ('[1, 51]', 'moving-average length of the trajectory pieces [points]'),
     'traffic_ctrl_spacing': ('[0.5, 50.0]', 'chord per control point of a traffic connector [m]'),
-    'traffic_smooth': ('[0.0, 1e6]', 'second-difference penalty on its control points'),
+    'traffic_smooth': ('[0.0, 1e6]', 'second-difference penalty on its control points (the largest '
+                       'candidate when traffic_smooth_steps >= 2)'),
+    'traffic_smooth_min': ('[0.0, 1e6]', 'smallest candidate penalty of a traffic connector'),
+    'traffic_smooth_steps': ('[0, 50]', 'candidate penalties from traffic_smooth_min to traffic_smooth '
+                             '(log spaced), the traffic picks one per connector by Akaike\'s '
+                             'criterion (lanes/spline.py); < 2: traffic_smooth alone'),
     'traffic_min_points': ('[3, 1e6]', 'fewest trajectory points to shape a connector'),
     'traffic_select': ('[0.0, 1000.0]', 'the fit replaces the start shape only when better by this '
                        'per parameter (2: Akaike; 0: always)'),
@@ -108,10 +113,12 @@ class LaneConfig:
     connector_spacing: float = 1.0
     connector_min_stations: int = 6
     connector_arc: int = 1
-    connector_traffic: int = 0
+    connector_traffic: int = 1
     traffic_presmooth: int = 5
     traffic_ctrl_spacing: float = 4.0
     traffic_smooth: float = 10.0
+    traffic_smooth_min: float = 0.1
+    traffic_smooth_steps: int = 3
     traffic_min_points: int = 10
     traffic_select: float = 2.0
     follow_lanes: int = 1

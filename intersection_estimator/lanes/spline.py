@@ -26,11 +26,13 @@ returns None and the caller keeps its own start shape.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
-from scipy.interpolate import BSpline
-from scipy.spatial import cKDTree
+from numba import njit
+
+from .likelihood import seg_dist2
 
 __all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector',
            'moving_average', 'second_differences', 'aic_prefers']
@@ -93,11 +95,16 @@ def _params(piece: np.ndarray) -> np.ndarray:
 
 
 def fit_connector(pieces: list[np.ndarray], c0, t0, c1, t1, *, ctrl_spacing: float = 4.0,
-                  smooth: float = 1.0, min_points: int = 10, iters: int = 3):
+                  smooth: float = 1.0, min_points: int = 10, iters: int = 3,
+                  smooth_grid=(), corr_length: float = 4.0, penalty: float = 2.0,
+                  clip: float = 3.0):
     """(control points (n, 2), knots) of the clamped cubic B-spline (module docstring),
     or None. The points' parameters start as their pieces' normalised arc length and
     are then ``iters`` times re-set to their foot points on the fitted curve (the spline
-    parameter is not arc length: without this the fit is pulled towards the chord)."""
+    parameter is not arc length: without this the fit is pulled towards the chord).
+
+    ``smooth_grid`` (beyond the paper): candidate penalties; at every step the one of the
+    best information criterion is taken (:func:`_fit_nb`); empty: ``smooth`` alone."""
     pieces = [p for p in pieces if len(p) >= 3]
     if sum(len(p) for p in pieces) < min_points:
         return None
@@ -107,70 +114,261 @@ def fit_connector(pieces: list[np.ndarray], c0, t0, c1, t1, *, ctrl_spacing: flo
     chord = float(np.linalg.norm(c1 - c0))
     n = int(np.clip(round(chord / ctrl_spacing) + 4, 5, 40))
     knots = np.r_[[0.0] * 3, np.linspace(0.0, 1.0, n - 2), [1.0] * 3]
+    Q = np.ascontiguousarray(np.concatenate(pieces), dtype=float)
     u = np.concatenate([_params(p) for p in pieces])
-    Q = np.concatenate(pieces)
-    fit = None
-    for _ in range(iters + 1):
-        fit = _solve(Q, u, knots, c0, t0, c1, t1, smooth)
-        if fit is None:
-            return None
-        fine = np.linspace(0.0, 1.0, 512)
-        P = BSpline(knots, fit, 3)(fine)
-        u = fine[cKDTree(P).query(Q)[1]]
-    return fit, knots
+    grid = np.asarray(smooth_grid if len(smooth_grid) else [smooth], float)
+    metres = sum(float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1))) for p in pieces)
+    ctrl = np.empty((n, 2))
+    ok = _fit_nb(Q, u, knots, c0, t0, c1, t1, grid * len(Q) / n, int(iters),
+                 max(metres / corr_length, 1.0), float(penalty), float(clip), ctrl)
+    return (ctrl, knots) if ok else None
 
 
-def _solve(Q, u, knots, c0, t0, c1, t1, smooth):
-    """One linear least-squares fit of the control points for fixed parameters ``u``."""
+_FINE = 512           # curve samples of the foot-point search
+_COARSE = 8           # every _COARSE-th sample is searched globally, then its neighbours
+
+
+@njit(cache=True)
+def _basis(u, knots, n, vals):
+    """Index of the first of the four cubic B-splines nonzero at ``u`` (clamped knots),
+    their values in ``vals`` (Cox-de Boor, Piegl & Tiller A2.2)."""
+    k = 3
+    while k < n - 1 and knots[k + 1] <= u:
+        k += 1
+    left, right = np.empty(4), np.empty(4)
+    vals[0] = 1.0
+    for j in range(1, 4):
+        left[j] = u - knots[k + 1 - j]
+        right[j] = knots[k + j] - u
+        saved = 0.0
+        for r in range(j):
+            den = right[r + 1] + left[j - r]
+            tmp = vals[r] / den if den > 0 else 0.0
+            vals[r] = saved + right[r + 1] * tmp
+            saved = left[j - r] * tmp
+        vals[j] = saved
+    return k - 3
+
+
+@njit(cache=True)
+def _unknown(j, d, n, t0, t1):
+    """Control point ``j``, coordinate ``d`` = const + coef * z[idx] (idx -1: fixed).
+    Unknowns: z = [alpha, beta, P_2x, P_2y, ..., P_{n-3}x, P_{n-3}y]."""
+    if j == 1:
+        return 0, t0[d]
+    if j == n - 2:
+        return 1, -t1[d]
+    if 2 <= j <= n - 3:
+        return 2 + 2 * (j - 2) + d, 1.0
+    return -1, 0.0
+
+
+@njit(cache=True)
+def _normal(Q, u, knots, c0, c1, t0, t1, G, g, S, s):
+    """Normal equations of the fit for fixed parameters ``u`` (module docstring, step 2):
+    data rows ``B (A z + b) = Q`` into ``G``, ``g``; second differences ``D (A z + b)``
+    into ``S``, ``s`` (unit weight). Returns ``|Q - B b|^2``."""
     n = len(knots) - 4
-    B = BSpline.design_matrix(np.clip(u, 0.0, 1.0), knots, 3).toarray()   # (m, n)
-    # unknowns z = [alpha, beta, P_2x, P_2y, ..., P_{n-3}x, P_{n-3}y]
-    inner = n - 4
-    nz = 2 + 2 * inner
+    BtB, BtQ = np.zeros((n, n)), np.zeros((n, 2))
+    vals = np.empty(4)
+    rr = 0.0
+    for i in range(len(Q)):
+        f = _basis(min(max(u[i], 0.0), 1.0), knots, n, vals)
+        for a in range(4):
+            BtQ[f + a, 0] += vals[a] * Q[i, 0]
+            BtQ[f + a, 1] += vals[a] * Q[i, 1]
+            for c in range(4):
+                BtB[f + a, f + c] += vals[a] * vals[c]
+        rr += Q[i, 0] * Q[i, 0] + Q[i, 1] * Q[i, 1]
+    DtD = np.zeros((n, n))
+    for r in range(n - 2):
+        for a in range(3):
+            for c in range(3):
+                DtD[r + a, r + c] += (1.0, -2.0, 1.0)[a] * (1.0, -2.0, 1.0)[c]
+    b = np.zeros((2, n))              # the fixed part of the control points, per coordinate
+    b[:, 0], b[:, 1], b[:, n - 2], b[:, n - 1] = c0, c0, c1, c1
+    G[:], g[:], S[:], s[:] = 0.0, 0.0, 0.0, 0.0
+    for d in range(2):
+        for j in range(n):
+            Bb, Db = 0.0, 0.0
+            for k in range(n):
+                Bb += BtB[j, k] * b[d, k]
+                Db += DtD[j, k] * b[d, k]
+            rr += b[d, j] * Bb - 2.0 * b[d, j] * BtQ[j, d]
+            p, cp = _unknown(j, d, n, t0, t1)
+            if p < 0:
+                continue
+            g[p] += cp * (BtQ[j, d] - Bb)
+            s[p] -= cp * Db
+            for k in range(n):
+                q, cq = _unknown(k, d, n, t0, t1)
+                if q >= 0:
+                    G[p, q] += cp * cq * BtB[j, k]
+                    S[p, q] += cp * cq * DtD[j, k]
+    return rr
 
-    # control points = A z + b (A: (n, 2, nz))
-    A = np.zeros((n, 2, nz))
-    b = np.zeros((n, 2))
-    b[0], b[1], b[n - 2], b[n - 1] = c0, c0, c1, c1
-    A[1, :, 0] = t0
-    A[n - 2, :, 1] = -t1
-    for j in range(inner):
-        A[2 + j, 0, 2 + 2 * j] = 1.0
-        A[2 + j, 1, 3 + 2 * j] = 1.0
-    # data rows: B @ P = Q, both coordinates
-    Md = np.einsum('mj,jdz->mdz', B, A).reshape(-1, nz)
-    rd = (Q - B @ b).reshape(-1)
-    # smoothness rows: second differences of the control points
-    D = second_differences(n)
-    Ms = math.sqrt(smooth * len(Q) / max(n, 1)) * np.einsum('kj,jdz->kdz', D, A).reshape(-1, nz)
-    rs = -math.sqrt(smooth * len(Q) / max(n, 1)) * (D @ b).reshape(-1)
-    z, *_ = np.linalg.lstsq(np.vstack([Md, Ms]), np.concatenate([rd, rs]), rcond=None)
-    if not np.all(np.isfinite(z)) or z[0] <= 0 or z[1] <= 0:
-        return None
-    return np.einsum('jdz,z->jd', A, z) + b
+
+@njit(cache=True)
+def _controls(z, c0, c1, t0, t1, n, out):
+    out[0], out[1], out[n - 2], out[n - 1] = c0, c0, c1, c1
+    out[1] += z[0] * t0
+    out[n - 2] -= z[1] * t1
+    for j in range(2, n - 2):
+        out[j, 0], out[j, 1] = z[2 + 2 * (j - 2)], z[3 + 2 * (j - 2)]
+
+
+@njit(cache=True)
+def _feet(Q, curve, u, clip, warm):
+    """Foot parameters of the points on the sampled curve into ``u`` (downhill along the
+    samples from a global search over every ``_COARSE``-th sample, or with ``warm`` from
+    the sample at ``u``: the curve moved little since); returns the sum of squared
+    distances clipped at ``clip``."""
+    m = len(curve)
+    rss = 0.0
+    for i in range(len(Q)):
+        best, bj = np.inf, 0
+        if warm:
+            bj = min(max(int(round(u[i] * (m - 1))), 0), m - 1)
+            best = (curve[bj, 0] - Q[i, 0]) ** 2 + (curve[bj, 1] - Q[i, 1]) ** 2
+        else:
+            for j in range(0, m, _COARSE):
+                d = (curve[j, 0] - Q[i, 0]) ** 2 + (curve[j, 1] - Q[i, 1]) ** 2
+                if d < best:
+                    best, bj = d, j
+        moved = True
+        while moved:
+            moved = False
+            for j in (bj - 1, bj + 1):
+                if 0 <= j < m:
+                    d = (curve[j, 0] - Q[i, 0]) ** 2 + (curve[j, 1] - Q[i, 1]) ** 2
+                    if d < best:
+                        best, bj, moved = d, j, True
+        u[i] = bj / (m - 1)
+        rss += min(best, clip * clip)
+    return rss
+
+
+@njit(cache=True)
+def _fit_nb(Q, u0, knots, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, out):
+    """The fit of :func:`fit_connector` into ``out``; False when no weight gives a valid
+    fit (the end handles ``alpha``, ``beta`` must point into the turn).
+
+    Each of the ``iters + 1`` rounds solves the penalised normal equations for every
+    weight of ``weights``; with several, the one minimising ``m_eff log RSS + penalty *
+    edf`` is kept -- a turn's shape is data, not a curve family: a tight turn at a real
+    junction needs a weak penalty, a wide arc seen through 1 m of sensor noise a strong
+    one, and which the traffic supports is read from it (Akaike's criterion, ``penalty``
+    2, as the selection rules here and in ``lanes/follow.py``). ``RSS``: squared
+    distances of the points to the curve, clipped at ``clip``; ``m_eff``: the metres the
+    pieces cover / ``corr_length`` (the points of one vehicle are not independent);
+    ``edf``: trace of the hat matrix ``(G + w S)^-1 G``. The points' parameters are then
+    re-set to their foot points on the kept curve."""
+    n = len(knots) - 4
+    nz = 2 + 2 * (n - 4)
+    G, S = np.empty((nz, nz)), np.empty((nz, nz))
+    g, s = np.empty(nz), np.empty(nz)
+    fine = np.empty((_FINE, 4))
+    first = np.empty(_FINE, np.int64)
+    vals = np.empty(4)
+    for j in range(_FINE):
+        first[j] = _basis(j / (_FINE - 1), knots, n, vals)
+        fine[j] = vals
+    curve = np.empty((_FINE, 2))
+    ctrl = np.empty((n, 2))
+    u, u_try, u_best = u0.copy(), np.empty(len(Q)), np.empty(len(Q))
+    rhs = np.empty((nz, nz + 1))
+    for it in range(iters + 1):
+        _normal(Q, u, knots, c0, c1, t0, t1, G, g, S, s)
+        best = np.inf
+        for w in weights:
+            H = G + w * S
+            rhs[:, 0] = g + w * s
+            rhs[:, 1:] = G
+            try:
+                sol = np.linalg.solve(H, rhs)
+            except Exception:           # singular: no points near some control point
+                continue
+            z = sol[:, 0]
+            if not np.all(np.isfinite(z)) or z[0] <= 0 or z[1] <= 0:
+                continue
+            _controls(z, c0, c1, t0, t1, n, ctrl)
+            for j in range(_FINE):
+                curve[j, 0], curve[j, 1] = 0.0, 0.0
+                for a in range(4):
+                    curve[j, 0] += fine[j, a] * ctrl[first[j] + a, 0]
+                    curve[j, 1] += fine[j, a] * ctrl[first[j] + a, 1]
+            u_try[:] = u
+            rss = _feet(Q, curve, u_try, clip, it > 0)
+            score = 0.0
+            if len(weights) > 1:
+                score = m_eff * np.log(max(rss, 1e-12)) + penalty * np.trace(sol[:, 1:])
+            if score < best:
+                best = score
+                out[:] = ctrl
+                u_best[:] = u_try
+        if best == np.inf:
+            return False
+        u[:] = u_best
+    return True
+
+
+def smooth_grid(cfg) -> np.ndarray:
+    """Candidate penalties of :func:`fit_connector`: ``traffic_smooth_steps`` values
+    spaced evenly in log from ``traffic_smooth_min`` to ``traffic_smooth``; empty (the fixed
+    ``traffic_smooth``) when ``traffic_smooth_steps`` < 2."""
+    return _grid(cfg.traffic_smooth_min, cfg.traffic_smooth, int(cfg.traffic_smooth_steps))
+
+
+@functools.lru_cache(maxsize=16)
+def _grid(lo: float, hi: float, steps: int) -> np.ndarray:
+    if steps < 2 or lo <= 0 or hi <= 0:
+        return np.zeros(0)
+    out = np.geomspace(lo, hi, steps)
+    out.flags.writeable = False
+    return out
 
 
 def sample_curve(ctrl: np.ndarray, knots: np.ndarray, spacing: float, min_st: int):
     """Points and unit tangents at equal arc length along the B-spline."""
-    spl = BSpline(knots, ctrl, 3)
+    ctrl = np.ascontiguousarray(ctrl, dtype=float)
     fine = np.linspace(0.0, 1.0, 256)
-    P = spl(fine)
+    P = _evaluate(ctrl, knots, fine)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
     m = max(min_st, int(round(arc[-1] / spacing)) + 1)
     u = np.interp(np.linspace(0.0, arc[-1], m), arc, fine)
-    T = spl.derivative()(u)
+    h = 1e-5                 # tangent by central differences of the parameter (one-sided at the ends)
+    T = _evaluate(ctrl, knots, np.minimum(u + h, 1.0)) - _evaluate(ctrl, knots, np.maximum(u - h, 0.0))
     T /= np.maximum(np.linalg.norm(T, axis=1, keepdims=True), 1e-12)
-    return spl(u), T
+    return _evaluate(ctrl, knots, u), T
 
 
+@njit(cache=True)
+def _evaluate(ctrl, knots, us):
+    """Points of the clamped cubic B-spline with control points ``ctrl`` at ``us``."""
+    n = len(knots) - 4
+    out = np.zeros((len(us), 2))
+    vals = np.empty(4)
+    for i in range(len(us)):
+        f = _basis(min(max(us[i], 0.0), 1.0), knots, n, vals)
+        for a in range(4):
+            out[i, 0] += vals[a] * ctrl[f + a, 0]
+            out[i, 1] += vals[a] * ctrl[f + a, 1]
+    return out
+
+
+@njit(cache=True)
 def _rss(Q: np.ndarray, line: np.ndarray, clip: float) -> float:
-    """Sum of clipped squared distances of ``Q`` to a polyline (resampled every 0.1 m)."""
-    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    q = np.linspace(0.0, s[-1], max(2, int(s[-1] / 0.1) + 1))
-    dense = np.stack([np.interp(q, s, line[:, 0]), np.interp(q, s, line[:, 1])], axis=1)
-    d = cKDTree(dense).query(Q)[0]
-    return float(np.sum(np.minimum(d, clip) ** 2))
+    """Sum of squared distances of ``Q`` to a polyline, each clipped at ``clip``."""
+    total = 0.0
+    for i in range(len(Q)):
+        best = clip * clip
+        for g in range(len(line) - 1):
+            d = seg_dist2(Q[i, 0], Q[i, 1], line[g, 0], line[g, 1], line[g + 1, 0],
+                          line[g + 1, 1])
+            if d < best:
+                best = d
+        total += best
+    return total
 
 
 def prefer_fit(pieces, fitted: np.ndarray, start: np.ndarray, n_params: int,
@@ -180,7 +378,8 @@ def prefer_fit(pieces, fitted: np.ndarray, start: np.ndarray, n_params: int,
     ``m log(RSS_start / RSS_fit) > penalty * n_params``)? ``penalty = 0``: always."""
     if penalty <= 0:
         return True
-    Q = np.concatenate(pieces)
+    Q = np.ascontiguousarray(np.concatenate(pieces), dtype=float)
+    start, fitted = (np.ascontiguousarray(x, dtype=float) for x in (start, fitted))
     return aic_prefers(len(Q), _rss(Q, start, clip), _rss(Q, fitted, clip), n_params, penalty)
 
 
@@ -197,7 +396,9 @@ def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):
     t1 = 0.5 * (O.left[1] + O.right[1]) - c1
     pieces = connector_pieces(trajs_xy, c0, c1, cfg.traffic_presmooth)
     fit = fit_connector(pieces, c0, t0, c1, t1, ctrl_spacing=cfg.traffic_ctrl_spacing,
-                        smooth=cfg.traffic_smooth, min_points=cfg.traffic_min_points)
+                        smooth=cfg.traffic_smooth, min_points=cfg.traffic_min_points,
+                        smooth_grid=smooth_grid(cfg), corr_length=cfg.follow_corr_length,
+                        penalty=2.0)
     if fit is None:
         return None
     C, T = sample_curve(*fit, cfg.connector_spacing, cfg.connector_min_stations)
