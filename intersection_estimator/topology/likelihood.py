@@ -208,53 +208,6 @@ def arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy)
 
 
 @njit(cache=True, fastmath=True)
-def arm_column_bits(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy, bits):
-    """:func:`arm_column_into` (the same two passes, the same numbers) that also writes the
-    bitset of the nonzero entries to ``bits`` (64 observations a word), taken from the
-    exponential pass's own test."""
-    if P[P_LANE_SUM] > 0.0:
-        _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out)
-        for q in range(bits.shape[0]):
-            w = np.uint64(0)
-            for j in range(min(64, ox.shape[0] - (q << 6))):
-                if out[(q << 6) + j] != 0.0:
-                    w |= np.uint64(1) << np.uint64(j)
-            bits[q] = w
-        return
-    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)
-    n = ox.shape[0]
-    for i in range(n):
-        px = ox[i] - cx
-        py = oy[i] - cy
-        s = px * ux + py * uy
-        t = py * ux - px * uy
-        c = hx[i] * ux + hy[i] * uy
-        side = 1.0 if t * ts > 0.0 else -1.0
-        dd = dcls[i] if dcls[i] != 0.0 else side
-        d = (1.0 if c < 0.0 else -1.0) if has_o[i] else dd
-        e = isa[i] * 2.0 * (1.0 - abs(c)) if has_o[i] else 0.0
-        nl = nin if d > 0.0 else nout
-        q = d * ts * t - hg
-        dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
-        sb = min(s, 0.0)
-        energy[i] = e + isp[i] * (sb * sb + dl * dl)
-        out[i] = inv_n_in if d > 0.0 else inv_n_out
-    cut = P[P_D2_CUT]
-    one = np.uint64(1)
-    for q in range(bits.shape[0]):
-        word = np.uint64(0)
-        base = q << 6
-        for j in range(min(64, n - base)):
-            i = base + j
-            if energy[i] < cut:
-                out[i] = out[i] * math.exp(-energy[i])
-                word |= one << np.uint64(j)
-            else:
-                out[i] = 0.0
-        bits[q] = word
-
-
-@njit(cache=True, fastmath=True)
 def _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """:func:`arm_column` with the sum over the lanes of that direction (``P_LANE_SUM``)."""
     cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)

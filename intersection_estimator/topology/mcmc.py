@@ -14,9 +14,8 @@ import math
 
 import numpy as np
 from numba import njit
-from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .likelihood import ObservationSet, all_columns_into, arm_column_bits, full_loglik
+from .likelihood import ObservationSet, all_columns_into, arm_column_into, full_loglik
 from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
 from .arm_offset import offset_log_prior
 from .prior import log_prior
@@ -220,78 +219,6 @@ def _audit_move(work, kind, k, n, C, C2, col, M, M2, nM, idx, cnt):
     work[W_MUST_LOGS] += changed_maxima(M, nM, idx, cnt)
 
 
-@njit(cache=True)
-def rescore_culled(C, n, k, col, has_col, cand, wts, floor, M, AM, Lg, idx, nM, nAM, nLg):
-    """:func:`rescore_arm` visiting only the observations of bitset ``cand``, in index
-    order (the same sums): ``cand`` must hold every observation whose best arm is ``k`` and,
-    with ``has_col``, every one where ``col`` is nonzero -- the others are skipped by
-    :func:`rescore_arm` too. Returns (delta, count, observations visited).
-
-    Not fastmath, with the sum written ``(delta + lg) - Lg[i]``: the order LLVM compiled
-    the fastmath :func:`rescore_arm`'s ``delta += lg - Lg[i]`` to (reassociated); written
-    as there, the culled loop's ``delta`` differs in the last bit for ~1 % of the calls."""
-    delta = 0.0
-    cnt = 0
-    seen = 0
-    one = np.uint64(1)
-    for q in range(cand.shape[0]):
-        b = cand[q]
-        while b:
-            i = (q << 6) + int(trailing_zeros(b))
-            b &= b - one
-            seen += 1
-            c = col[i] if has_col else 0.0
-            if AM[i] == k:
-                m = c
-                am = k if has_col and c > 0.0 else -1
-                for j in range(n):
-                    if j != k and C[j, i] > m:
-                        m = C[j, i]
-                        am = j
-            elif c > M[i]:
-                m = c
-                am = k
-            else:
-                continue
-            if m == M[i] and am == AM[i]:
-                continue
-            lg = wts[i] * math.log(m + floor)
-            idx[cnt] = i
-            nM[cnt] = m
-            nAM[cnt] = am
-            nLg[cnt] = lg
-            delta = (delta + lg) - Lg[i]
-            cnt += 1
-    return delta, cnt, seen
-
-
-@njit(cache=True, fastmath=True)
-def nonzero_bits(col, bits):
-    """``bits`` := the bitset of the nonzero entries of ``col`` (64 observations a word;
-    one pass, vectorises)."""
-    n = col.shape[0]
-    for q in range(bits.shape[0]):
-        w = np.uint64(0)
-        base = q << 6
-        for j in range(min(64, n - base)):
-            w |= np.uint64(col[base + j] != 0.0) << np.uint64(j)
-        bits[q] = w
-
-
-@njit(cache=True)
-def _rename_best(AM, bits, old, new):
-    """``AM[i] = new`` where ``AM[i] == old``, for ``i`` in bitset ``bits`` (a superset of
-    those: an observation's best arm has a nonzero density for it)."""
-    one = np.uint64(1)
-    for q in range(bits.shape[0]):
-        b = bits[q]
-        while b:
-            i = (q << 6) + int(trailing_zeros(b))
-            b &= b - one
-            if AM[i] == old:
-                AM[i] = new
-
-
 @njit(cache=True, nogil=True)   # inputs are served meanwhile (node.py)
 def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logqn, cumqn,
               ox, oy, hx, hy, has_o, dcls, isp, isa, wts, n_steps, temps, seed, stats,
@@ -301,18 +228,15 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
     Mutates ``S`` (chain state), ``C`` (per-arm density columns of ``S``) and
     ``best_S``; ``temps[t]`` is the temperature of step ``t``. The likelihood is
     incremental: a move of one arm recomputes only that arm's column and re-scores only
-    the observations whose best arm could change, found through the supports (issue 18:
-    ``sup[j]`` the bitset of arm slot ``j``'s nonzero densities; :func:`rescore_culled`
-    visits the old and the new support of the arm only); a center shift recomputes
-    everything. The numbers are those of the kernel that re-scored every observation,
-    bit for bit (``test/reference/chain_before.py``). ``stats[kind*2]`` counts proposals,
-    ``stats[kind*2+1]`` acceptances; ``work`` (:data:`WORK_FIELDS`) counts the likelihood
-    work, with ``audit`` also its lower bounds (:func:`_audit_move`). Returns (ll, lp,
-    best_lpost); ``ll`` is re-summed exactly at the end.
+    the observations whose best arm could change (see :func:`rescore_arm`); a center
+    shift recomputes everything. ``stats[kind*2]`` counts proposals, ``stats[kind*2+1]``
+    acceptances; ``work`` (:data:`WORK_FIELDS`) counts the likelihood work, with ``audit``
+    also its lower bounds (:func:`_audit_move`). Returns (ll, lp, best_lpost); ``ll`` is
+    re-summed exactly at the end.
 
     Length (over 80 lines): the Metropolis-Hastings loop with its incremental bookkeeping;
-    the accept branch updates six per-observation arrays and the supports in place,
-    which a helper call per accepted move would have to pass back.
+    the accept branch updates six per-observation arrays in place, which a helper call per
+    accepted move would have to pass back.
     """
     np.random.seed(seed)
     S2 = np.empty_like(S)
@@ -330,14 +254,7 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
     nM = np.empty(nobs)
     nAM = np.empty(nobs, np.int64)
     nLg = np.empty(nobs)
-    # per arm slot the bitset of its column's nonzeros (no allocation in the loop)
-    nw = (nobs + 63) // 64
-    sup = np.empty((MAXA, nw), np.uint64)
-    new = np.zeros((1, nw), np.uint64)        # the proposed column's nonzeros
-    cand = np.empty(nw, np.uint64)            # the observations re-scored
-    for j in range(MAXA):
-        nonzero_bits(C[j], sup[j])
-    energy = np.empty(nobs)       # arm_column_into scratch
+    energy = np.empty(nobs)       # arm_column_into scratch: no allocation in the loop
     ll = observation_maxima(C, int(S[2]), wts, floor, M, AM, Lg)
     for step in range(n_steps):
         ok, lq, kind, k = propose(S, S2, P, logqn, cumqn)
@@ -348,27 +265,21 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
         n = int(S[2])
         cnt = 0
         work[W_MOVES] += 1
+        work[W_VISITS] += nobs
         if kind == SHIFT:
             all_columns_into(S2, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C2, energy)
             ll2 = observation_maxima(C2, n2, wts, floor, M2, AM2, Lg2)
             work[W_ENTRIES] += n2 * nobs
-            work[W_VISITS] += nobs
             work[W_LOGS] += nobs
         elif kind == REMOVE_ARM:
-            d, cnt, seen = rescore_culled(C, n, k, col, False, sup[k], wts, floor, M, AM, Lg,
-                                          idx, nM, nAM, nLg)
+            d, cnt = rescore_arm(C, n, k, col, False, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
             ll2 = ll + d
-            work[W_VISITS] += seen
             work[W_LOGS] += cnt
         else:
-            arm_column_bits(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col, energy, new[0])
-            for q in range(nw):
-                cand[q] = new[0, q] | sup[k, q] if k < n else new[0, q]
-            d, cnt, seen = rescore_culled(C, n2, k, col, True, cand, wts, floor, M, AM, Lg,
-                                          idx, nM, nAM, nLg)
+            arm_column_into(S2, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col, energy)
+            d, cnt = rescore_arm(C, n2, k, col, True, wts, floor, M, AM, Lg, idx, nM, nAM, nLg)
             ll2 = ll + d
             work[W_ENTRIES] += nobs
-            work[W_VISITS] += seen
             work[W_LOGS] += cnt
         if audit:
             _audit_move(work, kind, k, n, C, C2, col, M, M2, nM, idx, cnt)
@@ -380,7 +291,6 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
         if kind == SHIFT:
             for j in range(n2):
                 C[j, :] = C2[j, :]
-                nonzero_bits(C[j], sup[j])
             M[:] = M2
             AM[:] = AM2
             Lg[:] = Lg2
@@ -393,11 +303,11 @@ def run_chain(S, C, ll, lp, best_S, best_lpost, P, logPA, logPn, arm_const, logq
             if kind == REMOVE_ARM:
                 if k != n - 1:
                     C[k, :] = C[n - 1, :]
-                    sup[k, :] = sup[n - 1, :]
-                    _rename_best(AM, sup[k], n - 1, k)
+                    for i in range(nobs):
+                        if AM[i] == n - 1:
+                            AM[i] = k
             else:
                 C[k, :] = col
-                sup[k, :] = new[0]
         S[:] = S2
         ll = ll2
         lp = lp2
