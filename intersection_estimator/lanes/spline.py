@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .likelihood import seg_dist2
+from .likelihood import window_d2
 
 __all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector',
            'moving_average', 'second_differences', 'aic_prefers']
@@ -361,13 +361,7 @@ def _rss(Q: np.ndarray, line: np.ndarray, clip: float) -> float:
     """Sum of squared distances of ``Q`` to a polyline, each clipped at ``clip``."""
     total = 0.0
     for i in range(len(Q)):
-        best = clip * clip
-        for g in range(len(line) - 1):
-            d = seg_dist2(Q[i, 0], Q[i, 1], line[g, 0], line[g, 1], line[g + 1, 0],
-                          line[g + 1, 1])
-            if d < best:
-                best = d
-        total += best
+        total += min(window_d2(line, 0, len(line) - 1, Q[i, 0], Q[i, 1]), clip * clip)
     return total
 
 

@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .init import arc_handle
-from .likelihood import seg_dist2
+from .likelihood import window_d2
 
 __all__ = ['fit_stops', 'path_cost', 'complete_partial']
 
@@ -60,13 +60,7 @@ def path_cost(stops, arm_in, off_in, arm_out, off_out, pptr, pts, O, U, N, sel, 
         p1y = O[b, 1] + stops[b] * U[b, 1] + off_out[i] * N[b, 1]
         _path(p0x, p0y, -U[a, 0], -U[a, 1], p1x, p1y, U[b, 0], U[b, 1], buf)
         for q in range(pptr[i], pptr[i + 1]):
-            best = clip2
-            for g in range(_NB + 1):
-                d = seg_dist2(pts[q, 0], pts[q, 1], buf[g, 0], buf[g, 1], buf[g + 1, 0],
-                              buf[g + 1, 1])
-                if d < best:
-                    best = d
-            total += best
+            total += min(window_d2(buf, 0, _NB + 1, pts[q, 0], pts[q, 1]), clip2)
     return total
 
 
