@@ -33,7 +33,7 @@ import numpy as np
 
 from ..components import components
 from ..observations import Detections
-from ..scenarios.floor import label_points, match_segments, traffic_counts, traffic_lines
+from ..scenarios.floor import drove, label_points, match_segments, traffic_counts, traffic_lines
 from ..scenarios.lanegraph import Segment, gt_from_lane_graph
 from ..scenarios.base import FamilyScenario
 from ..sim import SimConfig
@@ -188,7 +188,8 @@ def load_av2(folder, *, arm_length: float = 60.0) -> FamilyScenario:
         raise Av2Error(f'av2: {folder}: {e}') from None
     seg_of = match_segments(rows['xy'], rows['heading'], segs)
     users = np.isin(rows['type'], LANE_USERS)
-    labels = np.where(users, label_points(seg_of, rows['tid'], gt), '')
+    labels = drove(np.where(users, label_points(seg_of, rows['tid'], gt), ''), rows['tid'],
+                   rows['xy'], rows['t'])
     counts = traffic_counts(gt.lanelets, labels, rows['tid'])
     lines = traffic_lines(gt.lanelets, rows['xy'], labels)
     sid = Path(folder).name

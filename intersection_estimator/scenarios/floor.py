@@ -12,6 +12,11 @@ Labels: which lanelet each point belongs to comes from the lane-graph segment th
 vehicle was on (:func:`label_points`): SUMO reports it, the AV2 converter map-matches it
 (:func:`match_segments`). A vehicle's connector fixes which of the lanelets sharing an
 upstream segment (turn pockets) its approach belongs to.
+
+Traffic is what drove: a vehicle that stands still through the whole recording (a parked
+car, a car waiting at the kerb) shows neither a lane's course nor its direction, and the
+estimator must not build an arm from it (issue 15), so it is not asked for one either --
+:func:`drove` drops its labels before lanes are counted or followed.
 """
 
 from __future__ import annotations
@@ -21,7 +26,12 @@ import math
 import numpy as np
 
 __all__ = ['project', 'traffic_line', 'traffic_lines', 'label_points', 'traffic_counts',
-           'match_segments']
+           'match_segments', 'drove', 'MIN_TRAVEL_M']
+
+#: a vehicle whose positions, averaged over 1 s chunks (10 points), all lie within a box of
+#: this diagonal never drove in the recording (1 m sensor noise spreads a standing
+#: vehicle's chunk means over ~1-1.5 m)
+MIN_TRAVEL_M = 3.0
 
 
 def project(points: np.ndarray, line: np.ndarray):
@@ -98,6 +108,25 @@ def traffic_counts(lanelets, labels: np.ndarray, vehicle: np.ndarray, min_points
         if lid in out and c >= min_points:
             out[lid] += 1
     return out
+
+
+def drove(labels: np.ndarray, vehicle: np.ndarray, xy: np.ndarray, t: np.ndarray,
+          min_travel_m: float = MIN_TRAVEL_M, chunk: int = 10) -> np.ndarray:
+    """``labels`` with '' for every row of a vehicle that did not drive in the recording:
+    its positions averaged over consecutive ``chunk`` points (by ``t``; halves for a track
+    shorter than two chunks) span a box of diagonal below ``min_travel_m`` (module
+    docstring). A vehicle that drove up to a queue and stood there keeps its labels."""
+    out = np.asarray(labels).astype(object).copy()
+    vehicle = np.asarray(vehicle)
+    order = np.lexsort((np.asarray(t, float), vehicle))
+    cuts = np.flatnonzero(vehicle[order][1:] != vehicle[order][:-1]) + 1
+    for rows in np.split(order, cuts):
+        P = np.asarray(xy, float)[rows]
+        k = chunk if len(P) >= 2 * chunk else max(1, len(P) // 2)
+        means = np.stack([c.mean(0) for c in np.array_split(P, max(1, len(P) // k))])
+        if np.linalg.norm(np.ptp(means, axis=0)) < min_travel_m:
+            out[rows] = ''
+    return out.astype(str)
 
 
 def label_points(seg: np.ndarray, vehicle: np.ndarray, gt) -> np.ndarray:

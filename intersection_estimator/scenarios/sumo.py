@@ -29,7 +29,7 @@ from ..sim import SimConfig
 from ..sim.sensors import scene_sensor_range
 from ..sim.traffic import EgoTrajectory, Track
 from .base import FamilyScenario
-from .floor import label_points, traffic_counts, traffic_lines
+from .floor import drove, label_points, traffic_counts, traffic_lines
 from .sumo_config import SumoConfig
 from .sumo_demand import EGO_ID, sources_sinks, write_routes
 from .sumo_gt import net_gt, read_net
@@ -127,7 +127,8 @@ def _ego_choice(g, net, gt, arms=None):
 
 def _traffic(sc: FamilyScenario, fcd, gt, id_of: dict):
     """Traffic per lanelet and traffic-following lines from the tracked detections of
-    cars and trucks, each labelled with the SUMO lane its vehicle was on (module doc)."""
+    cars and trucks that drove in the window (``floor.drove``), each labelled with the
+    SUMO lane its vehicle was on (module doc)."""
     users = [f for f in fcd if f.kind in LANE_USERS]
     dets, cyc = sc._stream('tracked')
     labels = np.full(len(dets), '', dtype=object)
@@ -142,7 +143,7 @@ def _traffic(sc: FamilyScenario, fcd, gt, id_of: dict):
         j = np.clip(np.searchsorted(code[order], q), 0, len(code) - 1)
         hit = code[order][j] == q
         labels[hit] = lab[order][j[hit]]
-    labels = labels.astype(str)
+    labels = drove(labels.astype(str), dets.track_id, dets.xy, dets.t)
     sc.traffic = traffic_counts(gt.lanelets, labels, dets.track_id)
     sc.extra_gt = {lid: {'traffic_line': line}
                    for lid, line in traffic_lines(gt.lanelets, dets.xy, labels).items()}

@@ -111,3 +111,25 @@ def test_route_labels_of_a_table1_scene():
     assert (lab[~real] == '').all() and (lab[real] != '').mean() > 0.9
     routes = {tr.id: set(tr.route) for tr in sc.tracks}
     assert all(lid in routes[int(t)] for lid, t in zip(lab[real], d.track_id[real]) if lid)
+
+
+def test_a_vehicle_that_never_drove_is_not_traffic():
+    """A parked car (1 m sensor noise around one spot) loses its labels, so it neither
+    counts for its lane nor shapes the traffic line; a car that drives, and one that drives
+    up to a queue and stands there for most of the recording, keep theirs."""
+    from intersection_estimator.scenarios.floor import drove
+    rng = np.random.default_rng(7)
+    t = np.arange(300) * 0.1
+    parked = np.array([10.0, 3.0]) + rng.normal(0, 1.0, (300, 2))
+    moving = np.stack([10.0 * t, np.zeros_like(t)], 1) + rng.normal(0, 1.0, (300, 2))
+    queued = np.stack([np.minimum(10.0 * t, 12.0), np.full_like(t, -3.0)], 1) \
+        + rng.normal(0, 1.0, (300, 2))
+    xy = np.concatenate([parked, moving, queued])
+    vehicle = np.repeat([5, 6, 7], 300)
+    order = rng.permutation(len(xy))              # rows in any order: time decides
+    labels = np.full(len(xy), 'lane_a')
+    out = drove(labels[order], vehicle[order], xy[order], np.tile(t, 3)[order])
+    kept = {v: set(out[vehicle[order] == v]) for v in (5, 6, 7)}
+    assert kept == {5: {''}, 6: {'lane_a'}, 7: {'lane_a'}}
+    counts = traffic_counts([type('L', (), {'id': 'lane_a'})()], out, vehicle[order])
+    assert counts == {'lane_a': 2}
