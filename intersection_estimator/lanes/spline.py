@@ -15,13 +15,21 @@ Meyer, Walter, Lauer 2020 (arXiv 2007.06904) fit 1-D cubic B-splines to the traf
    squares to all pieces at once, with a second-difference penalty ``smooth`` on the
    control points; the lanes it joins fix it: ``P_0 = c0``, ``P_1 = c0 + alpha t0``,
    ``P_{n-2} = c1 - beta t1``, ``P_{n-1} = c1`` (end points shared, tangents continuous;
-   ``alpha``, ``beta`` and the inner control points are the unknowns);
+   ``alpha``, ``beta`` and the inner control points are the unknowns); the points'
+   parameters are then re-set to their foot points on the curve and the fit repeated;
+   the penalty is the traffic's choice among ``smooth_grid`` at every round (Akaike's
+   criterion, :func:`_fit_nb`): a tight turn gets a weak one, a wide turn seen through
+   sensor noise a strong one (beyond the 2020 paper, which fixes it);
 3. the curve is sampled at equal arc length (``spacing``) -- the connector's stations;
 4. it replaces the start shape only where it explains the traffic better by more than
    ``traffic_select`` per free parameter (:func:`prefer_fit`; 2 = Akaike's criterion).
 
 Too little traffic (fewer than ``min_points`` points in the pieces) or a degenerate fit
 returns None and the caller keeps its own start shape.
+
+The fit is compiled (``_basis``, ``_normal``, ``_fit_nb``, ``_evaluate``: the B-spline basis
+by Cox-de Boor, the normal equations assembled from it, the foot-point search); the scipy
+least squares it replaced is kept in ``test/reference/spline.py`` and checked against it.
 """
 
 from __future__ import annotations
