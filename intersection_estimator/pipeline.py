@@ -316,9 +316,11 @@ class OnlineEstimator:
     def passed(self, ego_xy, ego_yaw: float) -> bool:
         """True when the ego, seen approaching a converged estimate, is now ``reset_distance``
         past its center (an early, wrong center behind the ego must not throw data away).
-        Gated on the sampler's own state, as before the reported state had hysteresis."""
+        Gated on the sampler's own state, as before the reported state had hysteresis. An
+        estimate of fewer than three arms is a road, not an intersection: a point of a road
+        behind the ego is no reason to drop what was seen of the junction ahead."""
         best = self.result.intersection
-        if best is None or self.result.sampler_state != 'CONVERGED':
+        if best is None or self.result.sampler_state != 'CONVERGED' or len(best.arms) < 3:
             return False
         d = np.asarray(ego_xy, float) - best.center
         along = float(d @ np.array([np.cos(ego_yaw), np.sin(ego_yaw)]))

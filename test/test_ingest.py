@@ -118,3 +118,15 @@ def test_tick_resets_when_the_ego_has_passed_the_center(types):
     assert not est.passed((-30.0, 0.0), 0.0)     # approaching
     r = tick(ingest, est, wall_budget=False)
     assert est._resets == resets + 1 and r.intersection is None and r.state == 'NO_DATA'
+
+
+def test_a_road_behind_the_ego_is_not_a_passed_intersection():
+    """A converged estimate of two arms is a road: the ego driving past its center does not
+    end the window (the demo bag's first seconds showed one and threw its data away)."""
+    est = OnlineEstimator(P.pipeline_config(P.defaults()))
+    for arms, expected in (([Arm(0.0), Arm(3.1)], False),
+                           ([Arm(0.0), Arm(3.1), Arm(1.6)], True)):
+        est._approached = False
+        est.result = EstimateResult(Intersection([0.0, 0.0], arms), [], state='CONVERGED')
+        assert not est.passed((-30.0, 0.0), 0.0)          # approaching
+        assert est.passed((40.0, 0.0), 0.0) is expected, arms
