@@ -27,8 +27,8 @@ Meyer, Walter, Lauer 2020 (arXiv 2007.06904) fit 1-D cubic B-splines to the traf
 Too little traffic (fewer than ``min_points`` points in the pieces) or a degenerate fit
 returns None and the caller keeps its own start shape.
 
-The fit is compiled (``_basis``, ``_normal``, ``_fit_nb``, ``_evaluate``: the B-spline basis
-by Cox-de Boor, the normal equations assembled from it, the foot-point search); the scipy
+The fit is compiled (``_basis``, ``_data``, ``_reduce``, ``_fit_nb``, ``_combine``: the B-spline
+basis by Cox-de Boor, the normal equations assembled from it, the foot-point search); the scipy
 least squares it replaced is kept in ``test/reference/spline.py`` and checked against it.
 """
 
@@ -127,7 +127,8 @@ def fit_connector(pieces: list[np.ndarray], c0, t0, c1, t1, *, ctrl_spacing: flo
     grid = np.asarray(smooth_grid if len(smooth_grid) else [smooth], float)
     metres = sum(float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1))) for p in pieces)
     ctrl = np.empty((n, 2))
-    ok = _fit_nb(Q, u, knots, c0, t0, c1, t1, grid * len(Q) / n, int(iters),
+    D = second_differences(n)
+    ok = _fit_nb(Q, u, knots, D.T @ D, c0, t0, c1, t1, grid * len(Q) / n, int(iters),
                  max(metres / corr_length, 1.0), float(penalty), float(clip), ctrl)
     return (ctrl, knots) if ok else None
 
@@ -172,14 +173,36 @@ def _unknown(j, d, n, t0, t1):
 
 
 @njit(cache=True)
-def _normal(Q, u, knots, c0, c1, t0, t1, G, g, S, s):
-    """Normal equations of the fit for fixed parameters ``u`` (module docstring, step 2):
-    data rows ``B (A z + b) = Q`` into ``G``, ``g``; second differences ``D (A z + b)``
-    into ``S``, ``s`` (unit weight). Returns ``|Q - B b|^2``."""
+def _reduce(M, R, c0, c1, t0, t1, out_mat, out_vec):
+    """Normal equations in the unknowns ``z`` of a block ``P' M P - 2 P' R`` over the control
+    points ``P = A z + b`` (module docstring, step 2; ``b`` the fixed end points):
+    ``out_mat = A' M A``, ``out_vec = A' (R - M b)``, per coordinate. Data rows:
+    ``M = B'B``, ``R = B'Q``; second differences: ``M = D'D``, ``R = 0``."""
+    n = len(M)
+    b = np.zeros((2, n))              # the fixed part of the control points, per coordinate
+    b[:, 0], b[:, 1], b[:, n - 2], b[:, n - 1] = c0, c0, c1, c1
+    out_mat[:], out_vec[:] = 0.0, 0.0
+    for d in range(2):
+        for j in range(n):
+            p, cp = _unknown(j, d, n, t0, t1)
+            if p < 0:
+                continue
+            Mb = 0.0
+            for k in range(n):
+                Mb += M[j, k] * b[d, k]
+            out_vec[p] += cp * (R[j, d] - Mb)
+            for k in range(n):
+                q, cq = _unknown(k, d, n, t0, t1)
+                if q >= 0:
+                    out_mat[p, q] += cp * cq * M[j, k]
+
+
+@njit(cache=True)
+def _data(Q, u, knots):
+    """``B'B`` and ``B'Q`` of the design matrix ``B`` of the points ``Q`` at parameters ``u``."""
     n = len(knots) - 4
     BtB, BtQ = np.zeros((n, n)), np.zeros((n, 2))
     vals = np.empty(4)
-    rr = 0.0
     for i in range(len(Q)):
         f = _basis(min(max(u[i], 0.0), 1.0), knots, n, vals)
         for a in range(4):
@@ -187,33 +210,27 @@ def _normal(Q, u, knots, c0, c1, t0, t1, G, g, S, s):
             BtQ[f + a, 1] += vals[a] * Q[i, 1]
             for c in range(4):
                 BtB[f + a, f + c] += vals[a] * vals[c]
-        rr += Q[i, 0] * Q[i, 0] + Q[i, 1] * Q[i, 1]
-    DtD = np.zeros((n, n))
-    for r in range(n - 2):
-        for a in range(3):
-            for c in range(3):
-                DtD[r + a, r + c] += (1.0, -2.0, 1.0)[a] * (1.0, -2.0, 1.0)[c]
-    b = np.zeros((2, n))              # the fixed part of the control points, per coordinate
-    b[:, 0], b[:, 1], b[:, n - 2], b[:, n - 1] = c0, c0, c1, c1
-    G[:], g[:], S[:], s[:] = 0.0, 0.0, 0.0, 0.0
-    for d in range(2):
-        for j in range(n):
-            Bb, Db = 0.0, 0.0
-            for k in range(n):
-                Bb += BtB[j, k] * b[d, k]
-                Db += DtD[j, k] * b[d, k]
-            rr += b[d, j] * Bb - 2.0 * b[d, j] * BtQ[j, d]
-            p, cp = _unknown(j, d, n, t0, t1)
-            if p < 0:
-                continue
-            g[p] += cp * (BtQ[j, d] - Bb)
-            s[p] -= cp * Db
-            for k in range(n):
-                q, cq = _unknown(k, d, n, t0, t1)
-                if q >= 0:
-                    G[p, q] += cp * cq * BtB[j, k]
-                    S[p, q] += cp * cq * DtD[j, k]
-    return rr
+    return BtB, BtQ
+
+
+@njit(cache=True)
+def _basis_table(knots, us):
+    """Per parameter of ``us``: the first nonzero cubic B-spline and the four values."""
+    n = len(knots) - 4
+    first, vals = np.empty(len(us), np.int64), np.empty((len(us), 4))
+    for i in range(len(us)):
+        first[i] = _basis(min(max(us[i], 0.0), 1.0), knots, n, vals[i])
+    return first, vals
+
+
+@njit(cache=True)
+def _combine(ctrl, first, vals, out):
+    """Curve points from a :func:`_basis_table` and control points into ``out``."""
+    for i in range(len(first)):
+        out[i, 0], out[i, 1] = 0.0, 0.0
+        for a in range(4):
+            out[i, 0] += vals[i, a] * ctrl[first[i] + a, 0]
+            out[i, 1] += vals[i, a] * ctrl[first[i] + a, 1]
 
 
 @njit(cache=True)
@@ -257,7 +274,7 @@ def _feet(Q, curve, u, clip, warm):
 
 
 @njit(cache=True)
-def _fit_nb(Q, u0, knots, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, out):
+def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, out):
     """The fit of :func:`fit_connector` into ``out``; False when no weight gives a valid
     fit (the end handles ``alpha``, ``beta`` must point into the turn).
 
@@ -275,18 +292,15 @@ def _fit_nb(Q, u0, knots, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, 
     nz = 2 + 2 * (n - 4)
     G, S = np.empty((nz, nz)), np.empty((nz, nz))
     g, s = np.empty(nz), np.empty(nz)
-    fine = np.empty((_FINE, 4))
-    first = np.empty(_FINE, np.int64)
-    vals = np.empty(4)
-    for j in range(_FINE):
-        first[j] = _basis(j / (_FINE - 1), knots, n, vals)
-        fine[j] = vals
+    _reduce(DtD, np.zeros((n, 2)), c0, c1, t0, t1, S, s)    # the penalty: the same every round
+    first, fine = _basis_table(knots, np.linspace(0.0, 1.0, _FINE))
     curve = np.empty((_FINE, 2))
     ctrl = np.empty((n, 2))
     u, u_try, u_best = u0.copy(), np.empty(len(Q)), np.empty(len(Q))
     rhs = np.empty((nz, nz + 1))
     for it in range(iters + 1):
-        _normal(Q, u, knots, c0, c1, t0, t1, G, g, S, s)
+        BtB, BtQ = _data(Q, u, knots)
+        _reduce(BtB, BtQ, c0, c1, t0, t1, G, g)
         best = np.inf
         for w in weights:
             H = G + w * S
@@ -300,11 +314,7 @@ def _fit_nb(Q, u0, knots, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, 
             if not np.all(np.isfinite(z)) or z[0] <= 0 or z[1] <= 0:
                 continue
             _controls(z, c0, c1, t0, t1, n, ctrl)
-            for j in range(_FINE):
-                curve[j, 0], curve[j, 1] = 0.0, 0.0
-                for a in range(4):
-                    curve[j, 0] += fine[j, a] * ctrl[first[j] + a, 0]
-                    curve[j, 1] += fine[j, a] * ctrl[first[j] + a, 1]
+            _combine(ctrl, first, fine, curve)
             u_try[:] = u
             rss = _feet(Q, curve, u_try, clip, it > 0)
             score = 0.0
@@ -350,17 +360,10 @@ def sample_curve(ctrl: np.ndarray, knots: np.ndarray, spacing: float, min_st: in
     return _evaluate(ctrl, knots, u), T
 
 
-@njit(cache=True)
 def _evaluate(ctrl, knots, us):
     """Points of the clamped cubic B-spline with control points ``ctrl`` at ``us``."""
-    n = len(knots) - 4
-    out = np.zeros((len(us), 2))
-    vals = np.empty(4)
-    for i in range(len(us)):
-        f = _basis(min(max(us[i], 0.0), 1.0), knots, n, vals)
-        for a in range(4):
-            out[i, 0] += vals[a] * ctrl[f + a, 0]
-            out[i, 1] += vals[a] * ctrl[f + a, 1]
+    out = np.empty((len(us), 2))
+    _combine(ctrl, *_basis_table(knots, np.asarray(us, float)), out)
     return out
 
 
@@ -399,8 +402,7 @@ def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):
     pieces = connector_pieces(trajs_xy, c0, c1, cfg.traffic_presmooth)
     fit = fit_connector(pieces, c0, t0, c1, t1, ctrl_spacing=cfg.traffic_ctrl_spacing,
                         smooth=cfg.traffic_smooth, min_points=cfg.traffic_min_points,
-                        smooth_grid=smooth_grid(cfg), corr_length=cfg.follow_corr_length,
-                        penalty=2.0)
+                        smooth_grid=smooth_grid(cfg), corr_length=cfg.follow_corr_length)
     if fit is None:
         return None
     C, T = sample_curve(*fit, cfg.connector_spacing, cfg.connector_min_stations)
