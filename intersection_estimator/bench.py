@@ -329,6 +329,7 @@ def format_table(result: dict) -> str:
 
     rows = [
         ('arm accuracy', _fmt(s['arm_accuracy'], 'pct'), paper('arm_accuracy', 'pct')),
+        ('arm accuracy on arms with traffic', _fmt(s.get('arm_observed_accuracy'), 'pct'), ''),
         ('lane-level topology accuracy', _fmt(s['topology_accuracy'], 'pct'),
          paper('topology_accuracy', 'pct')),
         ('topology_observed (lanes with traffic)', _fmt(s.get('topology_observed_accuracy'), 'pct'),

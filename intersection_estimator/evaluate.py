@@ -2,7 +2,9 @@
 
 Per case (:func:`evaluate`):
 
-* ``arm_correct`` -- same number of arms;
+* ``arm_correct`` -- same number of arms; ``arms_observed_correct`` -- the arm half of
+  ``topology_observed_correct`` below: no estimated arm beyond the true arms and every true
+  arm that traffic used matched (an arm no vehicle drove may be missing);
 * ``topology_correct`` -- arm count right AND, after matching arms one-to-one by angular
   distance (Hungarian, ``linear_sum_assignment``), every matched arm's
   ``(lanes_in, lanes_out)`` right;
@@ -294,6 +296,7 @@ def _failed(reason, n_arms_true=None, gt_lanes=None) -> dict:
     traffic = sum(g['traffic'] > 0 for g in gt_lanes) if gt_lanes is not None else None
     return {'ok': False, 'reason': reason, 'n_arms_true': n_arms_true, 'n_arms_est': None,
             'arm_correct': False, 'topology_correct': False, 'topology_observed_correct': False,
+            'arms_observed_correct': False,
             'arms_true_used': None, 'road_case': None, 'intersection_reported': False,
             'floor_cm': None, 'floor_cm_sum': 0.0, 'floor_lanes': 0,
             'floor_cm_matched': None, 'floor_cm_matched_sum': 0.0, 'floor_lanes_matched': 0,
@@ -344,6 +347,7 @@ def evaluate(estimate, gt, *, gate: float = GATE_M, score_lanes: bool = True) ->
     return {'ok': True, 'reason': None, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
             'arm_correct': arm_correct, 'topology_correct': topo,
             'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
+            'arms_observed_correct': _arms_observed(ea, ga, c, used_in, used_out),
             'arms_true_used': int(np.count_nonzero(used_in + used_out)),
             'road_case': bool(np.count_nonzero(used_in + used_out) <= 2),
             'intersection_reported': len(ea) >= 3,
@@ -368,6 +372,7 @@ def _without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, t
     m.update({'ok': True, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
               'arm_correct': arm_correct, 'topology_correct': topo,
               'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
+              'arms_observed_correct': _arms_observed(ea, ga, c, used_in, used_out),
               'arms_true_used': int(np.count_nonzero(used_in + used_out)),
               'road_case': bool(np.count_nonzero(used_in + used_out) <= 2),
               'intersection_reported': len(ea) >= 3,
@@ -403,16 +408,22 @@ def _used_lanes(gt_lanes, n_arms):
     return used_in, used_out
 
 
+def _arms_observed(est_arms, gt_arms, c, used_in, used_out) -> bool:
+    """Arm count on what the traffic shows: no estimated arm beyond the true arms, every
+    true arm that traffic used matched (``c``: the matched true arms)."""
+    matched = set(int(j) for j in c)
+    return len(est_arms) <= len(gt_arms) and all(
+        j in matched for j in range(len(gt_arms)) if used_in[j] + used_out[j] > 0)
+
+
 def _topology_observed(est_arms, gt_arms, r, c, used_in, used_out) -> bool:
     """Lane-level topology on what the traffic shows (module docstring): lanes and arms
     no vehicle used are not asked for; nothing beyond the truth is excused."""
-    if len(est_arms) > len(gt_arms):
+    if not _arms_observed(est_arms, gt_arms, c, used_in, used_out):
         return False
     to_est = {int(j): int(i) for i, j in zip(r, c)}
     for j in range(len(gt_arms)):
         if j not in to_est:
-            if used_in[j] + used_out[j] > 0:
-                return False
             continue
         e = est_arms[to_est[j]]
         if not (used_in[j] <= e[1] <= gt_arms[j, 1] and used_out[j] <= e[2] <= gt_arms[j, 2]):
@@ -468,6 +479,8 @@ def aggregate(metrics: list[dict], timings: list[dict] | None = None) -> dict:
     summary = {
         'n': n, 'n_failed': n - len(ok),
         'arm_accuracy': _ratio(sum(m['arm_correct'] for m in metrics), n),
+        'arm_observed_accuracy': _ratio(
+            sum(m.get('arms_observed_correct', False) for m in metrics), n),
         'topology_accuracy': _ratio(sum(m['topology_correct'] for m in metrics), n),
         'topology_observed_accuracy': _ratio(
             sum(m.get('topology_observed_correct', False) for m in metrics), n),

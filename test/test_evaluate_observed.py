@@ -64,6 +64,7 @@ def test_lane_beyond_the_truth_is_never_excused(gt):
     extra_arm['arms'].append({**extra_arm['arms'][0],
                               'angle_deg': extra_arm['arms'][0]['angle_deg'] + 20.0})
     assert not evaluate(extra_arm, truth)['topology_observed_correct']
+    assert not evaluate(extra_arm, truth)['arms_observed_correct']
 
 
 def test_unused_arm_may_be_missing_a_used_one_not(gt):
@@ -76,8 +77,12 @@ def test_unused_arm_may_be_missing_a_used_one_not(gt):
     est['lanes'] = []     # topology only (lane indices would dangle)
     m = evaluate(est, truth)
     assert not m['arm_correct'] and m['topology_observed_correct']
+    assert m['arms_observed_correct']              # the arm half of topology_observed
     assert m['arms_true_used'] == len(gt['arms']) - 1
-    assert not evaluate(est, gt)['topology_observed_correct']
+    strict = evaluate(est, gt)
+    assert not strict['topology_observed_correct'] and not strict['arms_observed_correct']
+    pooled = aggregate([m, strict])
+    assert pooled['arm_accuracy'] == 0.0 and pooled['arm_observed_accuracy'] == 0.5
 
 
 def test_floor_is_the_distance_of_the_traffic_line(gt):
