@@ -235,6 +235,8 @@ class OnlineEstimator:
         self._lanes = LaneCourseEstimator(self.config.lanes, rng_lanes)
         self._lane_key = None
         self._lane_t = -np.inf
+        self._init_s: list[float] = []    # [s] the last INIT_COSTS lane initialisations + refinements
+        self._refine_s = 0.0              # [s] the last lane refinement (after the sampler)
         self._dirty = False
         self._idle_ticks = 0              # ticks since the last new observations
         self._approached = False
@@ -338,6 +340,10 @@ class OnlineEstimator:
         (each gets at least ``MIN_SHARE`` of it, so that data growing faster than the
         machine cannot starve the sampler). A tick that re-estimates the lane course ends
         ``lanes_reserve_s`` earlier: the caller's time to publish the new lanelets.
+        The lane course's initialisation (§III-A) cannot stop at a deadline, so the
+        topology first runs only until that initialisation, at its recent cost, would still
+        end in time; when the lane course is due this tick it stops there, else it goes on
+        to its own end (:meth:`_topology_phase`).
         """
         cfg = self.config
         t0 = time.perf_counter()
@@ -359,12 +365,14 @@ class OnlineEstimator:
             self._topo.set_observations(dets)
             self._lane_key = None if self._lane_key is None else ('stale',) + self._lane_key[1:]
             restart = len(dets) >= cfg.restart_growth * self._restart_n
-        if restart:
-            self._restart(dets, topo_end if wall_budget else None, total)
-        elif wall_budget:
-            self._topo.run(time_budget_s=_left(topo_end, total))
+        if not wall_budget:
+            if restart:
+                self._restart(dets, None, total)
+            else:
+                self._topo.run(n_samples=cfg.topology_samples)
         else:
-            self._topo.run(n_samples=cfg.topology_samples)
+            self._topology_phase(dets, restart, now, topo_end, deadline - lanes_reserve_s
+                                 - self._init_cost_s() - MIN_SHARE * total, total)
         t1 = time.perf_counter()
         best = self._topo.best
         # before the lane step, whose wall deadline then absorbs it (at lane cadence)
@@ -385,6 +393,44 @@ class OnlineEstimator:
             self._topo.best_log_posterior, self._convergence.update(now, sampler_state, best),
             len(dets), self._lanes_updated, sampler_state, observability=self._observability)
         return self.result
+
+    def _topology_phase(self, dets: Detections, restart: bool, now: float, topo_end: float,
+                        lanes_start: float, total: float) -> None:
+        """Wall-mode topology step: until ``lanes_start`` (the latest start of a lane
+        initialisation that, with a least sampler share and its refinement, ends in time)
+        if that comes before ``topo_end``, then on to ``topo_end`` unless the lane course is
+        initialised this tick (:meth:`_lanes_due`)."""
+        first = min(topo_end, max(lanes_start, time.perf_counter() + MIN_SHARE * total))
+        if restart:
+            self._restart(dets, first, total)
+        else:
+            self._topo.run(time_budget_s=_left(first, total))
+        if (first < topo_end and time.perf_counter() < topo_end
+                and not self._lanes_due(self._topo.best, dets, now)):
+            self._topo.run(time_budget_s=topo_end - time.perf_counter())
+
+    def _init_cost_s(self) -> float:
+        """[s] the longest of the recent lane initialisations with the refinement after
+        their sampler (0 before the first): what a lane update cannot cut short."""
+        return max(self._init_s, default=0.0)
+
+    def _lanes_due(self, best, dets: Detections, now: float) -> bool:
+        """Will :meth:`_tick_lanes` initialise the lane course (§III-A) this tick?"""
+        return self._lane_step(best, dets, now) == 'initialise'
+
+    def _lane_step(self, best, dets: Detections, now: float) -> str:
+        """What :meth:`_tick_lanes` does: 'none' (no topology), 'straight' (lanelets from
+        the topology), 'keep' (the last lanelets stand), 'initialise' or 'run'."""
+        cfg = self.config
+        if best is None:
+            return 'none'
+        if not cfg.lanes_enabled or not dets.has_tracks:
+            return 'straight'
+        key = _topology_key(best)
+        same_topology = self._lane_key is not None and self._lane_key[1:] == key[1:]
+        if same_topology and now - self._lane_t < cfg.lane_period:
+            return 'keep'
+        return 'initialise' if self._lane_key != key else 'run'
 
     def _restart(self, dets: Detections, topo_end: float | None, total: float) -> None:
         """Race a fresh chain (data-driven initialisation) against the warm one.
@@ -417,23 +463,30 @@ class OnlineEstimator:
         ``deadline`` (wall mode) it runs until then, initialisation included."""
         cfg = self.config
         self._lanes_updated = True
-        if best is None:
+        step = self._lane_step(best, dets, now)
+        if step == 'none':
             return []
-        if not cfg.lanes_enabled or not dets.has_tracks:
+        if step == 'straight':
             return lanelets_from_topology(best)
-        key = _topology_key(best)
-        same_topology = self._lane_key is not None and self._lane_key[1:] == key[1:]
-        if same_topology and now - self._lane_t < cfg.lane_period:
+        if step == 'keep':
             self._lanes_updated = False
             return self._lanes.lanelets
         self._lane_t = now
-        if self._lane_key != key:
+        fixed = 0.0
+        if step == 'initialise':
+            t = time.perf_counter()
             self._lanes.initialise(best, dets)
-            self._lane_key = key
+            fixed = time.perf_counter() - t
+            self._lane_key = _topology_key(best)
         if deadline is not None:
-            self._lanes.run(time_budget_s=_left(deadline, total))
+            # the sampler stops at the deadline; the refinement after it (§III-C) does not
+            self._lanes.run(time_budget_s=max(_left(deadline, total) - self._refine_s,
+                                              MIN_SHARE * total))
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
+        self._refine_s = self._lanes.timings.get('refine', 0.0)
+        if step == 'initialise':
+            self._init_s = (self._init_s + [fixed + self._refine_s])[-INIT_COSTS:]
         return self._lanes.lanelets
 
 
@@ -455,6 +508,9 @@ def needs_sampling(new_data: bool, state: str, idle_ticks: int) -> bool:
 
 #: Least share of the tick budget a step gets even when the tick is already late.
 MIN_SHARE = 0.05
+
+#: Lane initialisations whose longest wall time the next ticks plan with.
+INIT_COSTS = 5
 
 
 def _newest(t: np.ndarray, k: int) -> np.ndarray:

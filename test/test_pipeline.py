@@ -80,3 +80,39 @@ def test_online_ticks_are_deterministic_and_reach_the_topology(scenario):
     assert _json(a) == _json(b)
     assert len(a.intersection.arms) == len(scenario.gt.arms)
     assert a.lanelets and {l.kind for l in a.lanelets} == {'entering', 'leaving', 'connector'}
+
+
+class _Topo:
+    """A topology estimator stand-in that records its wall budgets and reports ``best``."""
+
+    def __init__(self, best):
+        self.best, self.budgets = best, []
+
+    def run(self, n_samples=None, time_budget_s=None):
+        self.budgets.append(time_budget_s)
+        return 0
+
+
+def test_topology_stops_early_when_the_lane_initialisation_is_due(scenario):
+    """Wall mode: with a known lane-initialisation cost the topology first runs only until
+    that initialisation would still end in time; it goes on to its own end only when the
+    lane course is not initialised this tick (the initialisation cannot be cut short)."""
+    import time
+    dets = scenario.detections('tracked')
+    est = OnlineEstimator(PipelineConfig(), seed=0)
+    est._topo = topo = _Topo(scenario.gt)
+    t0 = time.perf_counter()
+    topo_end, lanes_start = t0 + 60.0, t0 + 20.0       # generous: no test timing depends on it
+    assert est._lane_step(scenario.gt, dets, now=5.0) == 'initialise'   # no lanes yet
+    est._topology_phase(dets, False, 5.0, topo_end, lanes_start, 0.15)
+    assert len(topo.budgets) == 1 and topo.budgets[0] <= 20.0 + 1e-6
+    # the lane course stands for this topology and is not due before lane_period
+    from intersection_estimator.pipeline import _topology_key
+    est._lane_key, est._lane_t = _topology_key(scenario.gt), 4.5
+    assert est._lane_step(scenario.gt, dets, now=5.0) == 'keep'
+    topo.budgets.clear()
+    est._topology_phase(dets, False, 5.0, topo_end, lanes_start, 0.15)
+    assert len(topo.budgets) == 2 and topo.budgets[1] > 30.0
+    # a due lane run without initialisation does not stop the topology either
+    assert est._lane_step(scenario.gt, dets, now=9.0) == 'run'
+    assert est._lane_step(None, dets, now=9.0) == 'none'
