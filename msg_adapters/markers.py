@@ -23,7 +23,8 @@ import numpy as np
 
 from intersection_estimator.palette import RGBA
 
-__all__ = ['NAMESPACES', 'COLORS', 'markers_msg', 'clear_markers_msg', 'lanelet_marker_id']
+__all__ = ['NAMESPACES', 'COLORS', 'DRAW_STEP', 'markers_msg', 'clear_markers_msg', 'lanelet_marker_id',
+           'thin']
 
 NAMESPACES = ('center', 'arm_axes', 'left_lane_bound', 'right_lane_bound', 'center_lane_line',
               'center_line_arrows', 'connectors', 'lanelet_id')
@@ -33,6 +34,23 @@ ARROW, SPHERE, LINE_STRIP, TEXT_VIEW_FACING, TRIANGLE_LIST = 0, 2, 4, 9, 11
 ADD, DELETE, DELETEALL = 0, 2, 3
 _ARROW_SPACING = 8.0   # [m] between center line arrows
 _ARROW_SIZE = 1.2      # [m]
+#: [m] line strips are drawn with one vertex about every this many metres of arc (and both
+#: ends): a lane course has a station every ~0.5 m, and building thousands of Point
+#: messages per update cost the node tens of ms on real junctions. On a curve of radius R
+#: the drawn chord is within DRAW_STEP**2 / (8 R) of the lane (2.5 cm at R = 5 m). The
+#: ``~/lanelets`` topic keeps every station.
+DRAW_STEP = 1.0
+
+
+def thin(xy: np.ndarray, step: float) -> np.ndarray:
+    """The vertices of polyline ``xy`` (n, 2) at which its arc length first reaches each
+    multiple of ``step`` [m], and its last vertex."""
+    if len(xy) <= 2:
+        return xy
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    idx = np.unique(np.r_[np.searchsorted(s, np.arange(0.0, s[-1], step)), len(xy) - 1])
+    return xy[idx]
 
 
 def lanelet_marker_id(lanelet_id: str) -> int:
@@ -55,6 +73,10 @@ class _Builder:
 
     def points(self, xy):
         return self.types.points(xy)
+
+    def line(self, xy):
+        """Points of a line strip, one about every :data:`DRAW_STEP` (display only)."""
+        return self.types.points(thin(np.asarray(xy, float).reshape(-1, 2), DRAW_STEP))
 
     def marker(self, ns, mid, mtype, color, scale=(0.2, 0.2, 0.2), points=(), position=(0.0, 0.0),
                text='', action=ADD):
@@ -88,10 +110,10 @@ def _lanelet_markers(b: _Builder, ll, mid: int) -> list:
     connector = ll.kind == 'connector'
     bound = 'virtual_bound' if connector else 'bound'
     width = 0.08 if connector else 0.15
-    out = [b.marker('left_lane_bound', mid, LINE_STRIP, bound, (width, 0, 0), b.points(ll.left)),
-           b.marker('right_lane_bound', mid, LINE_STRIP, bound, (width, 0, 0), b.points(ll.right)),
+    out = [b.marker('left_lane_bound', mid, LINE_STRIP, bound, (width, 0, 0), b.line(ll.left)),
+           b.marker('right_lane_bound', mid, LINE_STRIP, bound, (width, 0, 0), b.line(ll.right)),
            b.marker('connectors' if connector else 'center_lane_line', mid, LINE_STRIP, ll.kind,
-                    (0.15, 0, 0), b.points(ll.center))]
+                    (0.15, 0, 0), b.line(ll.center))]
     tri = _arrow_triangles(ll.center)
     if len(tri):
         out.append(b.marker('center_line_arrows', mid, TRIANGLE_LIST, 'arrow', (1.0, 1.0, 1.0),

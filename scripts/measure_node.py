@@ -116,6 +116,8 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
            'tick_ms_p95': float(last.get('tick_ms_p95', 'nan')),
            'tick_ms_p95_max': max((float(v['tick_ms_p95']) for _, v in vals), default=float('nan')),
            'overhead_ms_last': float(last.get('overhead_ms', 'nan')),
+           'lanes_publish_ms_max': max((float(v.get('lanes_publish_ms', 'nan')) for _, v in vals),
+                                       default=float('nan')),
            'estimation_ms_median': _pct(est, 0.5), 'estimation_ms_p95': _pct(est, 0.95),
            'ticks_with_data': len(vals), 'true_arms': n_arms, 'right_arm_count': first is not None}
     if first is not None:

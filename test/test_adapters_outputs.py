@@ -93,3 +93,23 @@ def test_arrows_point_in_driving_direction(sc):
     c = sc.gt_lanelets[0].center
     d = (c[-1] - c[0]) / np.linalg.norm(c[-1] - c[0])
     assert ((tip - base) @ d > 0).all()
+
+
+def test_line_strips_are_thinned_for_display_only(sc):
+    """Line strips keep both ends and a vertex about every DRAW_STEP; the drawn chord of a
+    5 m radius turn stays within 3 cm of the lane; ``~/lanelets`` keeps every station."""
+    from msg_adapters.markers import DRAW_STEP, thin
+    a = np.linspace(0.0, 0.5 * np.pi, 200)                 # 7.85 m of a 5 m radius arc
+    arc = 5.0 * np.stack([np.cos(a), np.sin(a)], axis=1)
+    drawn = thin(arc, DRAW_STEP)
+    assert np.array_equal(drawn[0], arc[0]) and np.array_equal(drawn[-1], arc[-1])
+    assert 8 <= len(drawn) <= 10
+    mid = 0.5 * (drawn[1:] + drawn[:-1])                      # worst point of each chord
+    assert np.all(5.0 - np.hypot(mid[:, 0], mid[:, 1]) < 0.03)
+    T = RclpyTypes()
+    ll = sc.gt_lanelets[0]
+    arr, _ = markers_msg(T, make_header(T, 'map', 0.0), None, [ll])
+    (left,) = [m for m in arr.markers if m.ns == 'left_lane_bound']
+    assert len(left.points) == len(thin(np.asarray(ll.left, float), DRAW_STEP)) <= len(ll.left)
+    msg = lanelets_msg(T, make_header(T, 'map', 0.0), [ll])
+    assert len(msg.lanelets[0].left) == len(ll.left)
