@@ -9,6 +9,11 @@ time (median / p95 / max over the run, from the node's own diagnostics) against
 ground truth's number of arms. DDS stays on this host with its own domain id.
 
     .venv/bin/python scripts/measure_node.py bags/tracked [--rate 1.0] [--json out.json]
+    .venv/bin/python scripts/measure_node.py --sumo 121      # a SUMO family case as the bag
+
+``--sumo SEED`` writes that case of the SUMO family (issue 15: a real junction's size, e.g.
+seed 121: 6 arms, 34 lanelets, 28.6k tracked rows over 41 s) as a tracked-objects bag with
+its ground truth into a temporary folder and measures on it.
 """
 
 from __future__ import annotations
@@ -127,12 +132,31 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
     return out
 
 
+def _sumo_bag(seed: int, folder: Path) -> str:
+    """Write SUMO family case ``seed`` as a tracked bag + ``<bag>.gt.json`` in ``folder``."""
+    sys.path.insert(0, str(ROOT))
+    from intersection_estimator.bagio.scenario import write_scenario_bag
+    from intersection_estimator.bench import BenchOptions, make_case
+    from intersection_estimator.estimate_io import dumps
+    sc, gt = make_case(BenchOptions(n=1, seed=0, mode='tracked', family='sumo'), seed)
+    bag = folder / f'sumo_{seed}'
+    write_scenario_bag(sc, bag, sensors=('tracked',))
+    Path(str(bag) + '.gt.json').write_text(dumps(gt))
+    return str(bag)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('bag')
+    ap.add_argument('bag', nargs='?')
+    ap.add_argument('--sumo', type=int, metavar='SEED', help='measure on this SUMO family case')
     ap.add_argument('--rate', type=float, default=1.0)
     ap.add_argument('--json')
     args = ap.parse_args(argv)
+    if (args.bag is None) == (args.sumo is None):
+        ap.error('give a bag or --sumo SEED')
+    if args.sumo is not None:
+        tmp = tempfile.TemporaryDirectory(prefix='ie_measure_sumo_')
+        args.bag = _sumo_bag(args.sumo, Path(tmp.name))
     if not Path(args.bag).exists():
         print(f'measure_node: no such bag: {args.bag}', file=sys.stderr)
         return 1
