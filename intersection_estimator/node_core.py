@@ -136,6 +136,8 @@ class EstimatorCore:
         self.ingest = Ingest(values, self.types)
         self._marker_keys: frozenset = frozenset()
         self._lanes_out = False            # lanelets / markers of an intersection are latched
+        self._lanes_due = None             # (header, result) of a lane course not yet published
+        self._lanes_waited = False         # ... that already waited one tick
         self._resets_seen = self.estimator.resets
         self._tick_ms: list[float] = []
         # recent time [ms] ticks spent besides estimating, per kind (see _tick): the budget
@@ -254,9 +256,13 @@ class EstimatorCore:
             samples = self.estimator.result.topology_samples
             base, lanes = self._overheads()
             stamp = self.ingest.latest_stamp      # the data time this tick estimates
+            # new lanelets are published in the first tick with room for them
+            # (_publish_lanes_now): a lane update's estimation keeps the whole budget, a
+            # tick with lanelets waiting leaves room for publishing them
+            reserve = lanes if self._lanes_due is not None else 0.0
+            budget = self.values['budget_ms']
             result = tick(self.ingest, self.estimator, wall_budget=True, log=self.get_logger().info,
-                          budget_s=max(self.values['budget_ms'] - base, 0.5 * self.values['budget_ms']) / 1e3,
-                          lanes_reserve_s=min(max(lanes - base, 0.0), 0.5 * self.values['budget_ms']) / 1e3)
+                          budget_s=max(budget - base - reserve, 0.5 * budget) / 1e3)
             if result is not None and result.topology_samples < samples:
                 self._prev_samples = 0
             if not self._stop.is_set():
@@ -284,20 +290,43 @@ class EstimatorCore:
         else:
             self.pub_topology.publish(topology_msg(t, header, result.intersection, result.topology_samples,
                                                    result.log_posterior, result.observations, result.state))
-            if result.lanes_updated:   # latched: subscribers keep the last one meanwhile
-                self.pub_lanelets.publish(lanelets_msg(t, header, result.lanelets, result.lane_samples))
-                markers, self._marker_keys = markers_msg(t, header, result.intersection, result.lanelets,
-                                                         self._marker_keys)
-                self.pub_markers.publish(markers)
-                self._lanes_out = True
-                self._write_osm(result.lanelets)
-                self._publish_map_changes(header, result)
+            if result.lanes_updated:          # the newest lane course waits for its tick
+                self._lanes_due = (header, result)
+        published = self._lanes_due is not None and self._publish_lanes_now(t0)
+        if published:
+            self._publish_lanes(*self._lanes_due)
+            self._lanes_due = None
         self._tick_ms.append((time.perf_counter() - t0) * 1e3)
         self._tick_ms = self._tick_ms[-100:]
         if result is not None and result.timing_ms:   # what ticks spend besides estimating:
             over = max(self._tick_ms[-1] - result.timing_ms.get('total', 0.0), 0.0)   # messages,
-            self._overhead_ms[bool(result.lanes_updated)].append(over)   # markers when lanes changed
+            self._overhead_ms[published].append(over)   # lanelets and markers when published
         self.pub_diag.publish(self._diagnostics(header, result))
+
+    def _publish_lanes_now(self, t0: float) -> bool:
+        """Publish the waiting lane course in this tick? Yes when the recent worst cost of
+        publishing it still fits into the budget after this tick's estimation, or when it
+        has already waited one tick (lanelets are at most one tick period late)."""
+        if self._lanes_waited:
+            self._lanes_waited = False
+            return True
+        _, cost = self._overheads()
+        if (time.perf_counter() - t0) * 1e3 + cost <= self.values['budget_ms']:
+            return True
+        self._lanes_waited = True
+        return False
+
+    def _publish_lanes(self, header, result) -> None:
+        """~/lanelets, the markers, the OSM file and the map changes of ``result``
+        (latched: subscribers keep the last ones meanwhile)."""
+        t = self.types
+        self.pub_lanelets.publish(lanelets_msg(t, header, result.lanelets, result.lane_samples))
+        markers, self._marker_keys = markers_msg(t, header, result.intersection, result.lanelets,
+                                                 self._marker_keys)
+        self.pub_markers.publish(markers)
+        self._lanes_out = True
+        self._write_osm(result.lanelets)
+        self._publish_map_changes(header, result)
 
     def _clear_after_reset(self, header) -> None:
         """The estimator started over: the latched lanes and markers of the previous
@@ -306,6 +335,7 @@ class EstimatorCore:
         if resets == self._resets_seen:
             return
         self._resets_seen = resets
+        self._lanes_due, self._lanes_waited = None, False    # the previous intersection's
         if self._lanes_out or self._marker_keys:
             self.pub_markers.publish(clear_markers_msg(self.types, header))
             self.pub_lanelets.publish(lanelets_msg(self.types, header, [], 0))

@@ -5,6 +5,8 @@ array parameters (mount_*) settable at run time."""
 from __future__ import annotations
 
 import array
+from dataclasses import replace
+import time
 
 import numpy as np
 import pytest
@@ -47,10 +49,10 @@ def _result() -> EstimateResult:
 
 def test_outputs_carry_data_time_and_zero_before_data(make_node):
     node = make_node()
-    node._publish(None, 0.0, None)
+    node._publish(None, time.perf_counter(), None)
     stamp = node.sent['topology'][-1].header.stamp
     assert (stamp.sec, stamp.nanosec) == (0, 0)          # no data yet: no (wall) time to claim
-    node._publish(_result(), 0.0, T_DATA)
+    node._publish(_result(), time.perf_counter(), T_DATA)
     for name in ('topology', 'lanelets', 'diag'):
         s = node.sent[name][-1].header.stamp
         assert s.sec + 1e-9 * s.nanosec == pytest.approx(T_DATA, abs=1e-6), name
@@ -60,22 +62,22 @@ def test_outputs_carry_data_time_and_zero_before_data(make_node):
 def test_a_reset_deletes_all_markers_and_publishes_empty_lanelets(make_node):
     from visualization_msgs.msg import Marker
     node = make_node()
-    node._publish(_result(), 0.0, T_DATA)
+    node._publish(_result(), time.perf_counter(), T_DATA)
     assert node.sent['lanelets'][-1].lanelets and node.sent['markers'][-1].markers
     node.estimator.reset()                               # what "ego passed" / a time jump do
-    node._publish(None, 0.0, T_DATA + 1.0)
+    node._publish(None, time.perf_counter(), T_DATA + 1.0)
     (clear,) = node.sent['markers'][-1].markers
     assert clear.action == Marker.DELETEALL
     assert list(node.sent['lanelets'][-1].lanelets) == []
     n = len(node.sent['markers'])
-    node._publish(None, 0.0, T_DATA + 2.0)               # once per reset, not every tick
+    node._publish(None, time.perf_counter(), T_DATA + 2.0)               # once per reset, not every tick
     assert len(node.sent['markers']) == n
 
 
 def test_topics_of_missing_packages_are_an_error_on_diagnostics(make_node):
     from diagnostic_msgs.msg import DiagnosticStatus
     node = make_node(radar_scan_topics=['/radar/scan'], autoware_object_topics=['/aw/objects'])
-    node._publish(None, 0.0, None)
+    node._publish(None, time.perf_counter(), None)
     (err,) = [s for s in node.sent['diag'][-1].status if s.level == DiagnosticStatus.ERROR]
     for text in ('/radar/scan', 'radar_msgs', '/aw/objects', 'autoware_perception_msgs'):
         assert text in err.message
@@ -103,15 +105,15 @@ def test_osm_path_gets_the_lane_course_with_its_geo_origin_and_is_emptied_on_res
     from intersection_estimator.export.osm import load_osm, read_origin
     target = tmp_path / 'maps' / 'live.osm'
     node = make_node(osm_path=str(target), geo_origin=[48.1, 11.6])
-    node._publish(_result(), 0.0, T_DATA)
+    node._publish(_result(), time.perf_counter(), T_DATA)
     assert not target.exists()                       # its folder is missing: logged, the node goes on
     target.parent.mkdir()
-    node._publish(_result(), 0.0, T_DATA + 1.0)
+    node._publish(_result(), time.perf_counter(), T_DATA + 1.0)
     assert read_origin(target) == (48.1, 11.6)
     assert len(load_osm(target).laneletLayer) == len(_result().lanelets)
     assert not list(target.parent.glob('.*tmp*'))    # written beside it and renamed
     node.estimator.reset()                           # what "ego passed" does
-    node._publish(None, 0.0, T_DATA + 2.0)
+    node._publish(None, time.perf_counter(), T_DATA + 2.0)
     assert len(load_osm(target).laneletLayer) == 0
 
 
@@ -134,13 +136,13 @@ def test_prior_map_publishes_map_changes_and_their_markers(make_node, tmp_path):
     res = EstimateResult(sc.gt, sc.gt_lanelets, {'total': 1.0}, 100, 10, -5.0, 'CONVERGED', 500, True)
     moved, _ = apply_edit(sc, 'lane_moved', np.random.default_rng(1))
     node = make_node(prior_map=str(write_osm(tmp_path / 'prior.osm', moved)))
-    node._publish(res, 0.0, T_DATA)
+    node._publish(res, time.perf_counter(), T_DATA)
     (msg,) = node.sent['map_changes']
     assert msg.intersection_id and msg.header.stamp.sec == int(T_DATA)
     assert [c.kind for c in msg.changes] == ['lane_moved'], [c.kind for c in msg.changes]
     assert any(m.ns == NAMESPACE for arr in node.sent['markers'] for m in arr.markers)
     node.estimator.reset()
-    node._publish(None, 0.0, T_DATA + 1.0)
+    node._publish(None, time.perf_counter(), T_DATA + 1.0)
     assert list(node.sent['map_changes'][-1].changes) == []
 
 
@@ -149,3 +151,20 @@ def test_a_prior_map_that_does_not_load_is_refused_naming_it(make_node, tmp_path
     bad.write_text('<osm><node id="1"')
     with pytest.raises(ValueError, match='prior_map'):
         make_node(prior_map=str(bad))
+
+
+def test_lanelets_of_a_late_tick_go_out_with_the_next_one(make_node):
+    """A tick whose estimation left no room for publishing the new lane course (its
+    recent worst cost) publishes topology only; the next tick publishes the lanelets and
+    markers, whatever its own lateness (at most one tick late)."""
+    node = make_node()
+    node._overhead_ms[True].append(40.0)             # publishing lanes cost 40 ms lately
+    late = time.perf_counter() - 0.001 * (node.values['budget_ms'] - 20.0)   # 20 ms left
+    node._publish(_result(), late, T_DATA)
+    assert 'lanelets' not in node.sent and node.sent['topology']
+    node._publish(replace(_result(), lanes_updated=False), late, T_DATA + 0.2)
+    assert len(node.sent['lanelets']) == 1 and node.sent['markers']
+    s = node.sent['lanelets'][-1].header.stamp         # the data time of its own estimate
+    assert s.sec + 1e-9 * s.nanosec == pytest.approx(T_DATA, abs=1e-6)
+    node._publish(_result(), time.perf_counter(), T_DATA + 0.4)   # room: at once
+    assert len(node.sent['lanelets']) == 2
