@@ -9,7 +9,8 @@ import numpy as np
 
 from intersection_estimator.evaluate import lane_distance
 from intersection_estimator.lanes import LaneConfig
-from intersection_estimator.lanes.follow import _weighted_normal, fit_offset, select_offset
+from intersection_estimator.lanes.follow import fit_offset, select_offset
+from intersection_estimator.lanes.spline import _data
 from intersection_estimator.lanes.init import (Trajectory, fit_frames, lane_specs,
                                                split_at_center, stop_distances)
 from intersection_estimator.model import Arm, Intersection
@@ -134,7 +135,8 @@ def test_lane_without_traffic_moves_with_its_neighbour():
 
 
 def test_compiled_normal_equations_match_the_design_matrix():
-    """The banded kernel gives scipy's design-matrix products: points inside, on both
+    """The banded kernel (``spline._data``, weighted, as the approach fit calls it) gives
+    scipy's design-matrix products: points inside, on both
     ends and beyond the knots (clamped), with weights, for short and long axes."""
     from reference.follow import normal_reference
     rng = np.random.default_rng(11)
@@ -142,7 +144,8 @@ def test_compiled_normal_equations_match_the_design_matrix():
         knots = np.r_[[lo] * 3, np.linspace(lo, hi, n - 2), [hi] * 3]
         s = np.r_[rng.uniform(lo - 5.0, hi + 5.0, 300), lo, hi]
         r, w = rng.normal(0, 1, len(s)), rng.uniform(0, 3, len(s))
-        BtB, Btr = _weighted_normal(s, r, w, knots, n)
+        BtB, Btr = _data(r.reshape(-1, 1), s, knots, w)
+        Btr = Btr[:, 0]
         ref_BtB, ref_Btr = normal_reference(s, r, w, lo, hi, knots)
         assert np.allclose(BtB, ref_BtB, rtol=1e-12, atol=1e-12)
         assert np.allclose(Btr, ref_Btr, rtol=1e-12, atol=1e-12)

@@ -49,12 +49,11 @@ knows how the simulators draw their roads: the curve is a generic smoothing spli
 
 from __future__ import annotations
 
-from numba import njit
 import numpy as np
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-from .spline import _basis, aic_prefers, moving_average, second_differences
+from .spline import _data, aic_prefers, moving_average, second_differences
 
 __all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'arm_shift', 'follow_borders']
 
@@ -96,7 +95,8 @@ def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing:
     w = np.ones(len(s)) if w is None else np.asarray(w, float)
     n = int(np.clip(round((hi - lo) / ctrl_spacing) + 3, 4, 60))
     knots = np.r_[[lo] * 3, np.linspace(lo, hi, n - 2), [hi] * 3]
-    BtB, Btr = _weighted_normal(np.asarray(s, float), np.asarray(r, float), w, knots, n)
+    BtB, Btr = _data(np.asarray(r, float).reshape(-1, 1), np.asarray(s, float), knots, w)
+    Btr = Btr[:, 0]
     D = second_differences(n)
     H = BtB + (smooth * w.sum() / n) * (D.T @ D) + 1e-9 * np.eye(n)
     coef = np.linalg.solve(H, Btr)
@@ -104,25 +104,6 @@ def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing:
         return None
     edf = float(np.trace(np.linalg.solve(H, BtB)))
     return OffsetFit(BSpline(knots, coef, 3), edf, lo, hi)
-
-
-@njit(cache=True)
-def _weighted_normal(s, r, w, knots, n):
-    """``B'WB`` and ``B'Wr`` of the cubic B-spline design matrix ``B`` at ``s`` (clamped to
-    the knots' range), ``W = diag(w)``: the four nonzero basis values of each point
-    (:func:`.spline._basis`) accumulated into the banded normal equations, without the
-    (m, n) design matrix (``test/reference/follow.py`` builds it with scipy)."""
-    BtB, Btr = np.zeros((n, n)), np.zeros(n)
-    vals = np.empty(4)
-    lo, hi = knots[0], knots[-1]
-    for i in range(len(s)):
-        f = _basis(min(max(s[i], lo), hi), knots, n, vals)
-        for a in range(4):
-            wa = w[i] * vals[a]
-            Btr[f + a] += wa * r[i]
-            for c in range(4):
-                BtB[f + a, f + c] += wa * vals[c]
-    return BtB, Btr
 
 
 def _gated_fit(s, r, w, lo, hi, cfg):

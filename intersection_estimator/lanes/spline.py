@@ -198,18 +198,24 @@ def _reduce(M, R, c0, c1, t0, t1, out_mat, out_vec):
 
 
 @njit(cache=True)
-def _data(Q, u, knots):
-    """``B'B`` and ``B'Q`` of the design matrix ``B`` of the points ``Q`` at parameters ``u``."""
+def _data(Q, u, knots, w):
+    """``B'WB`` and ``B'WQ`` of the cubic B-spline design matrix ``B`` at parameters ``u``
+    (clamped to the knots' range), ``W = diag(w)``, for data ``Q`` (m, d): the four nonzero
+    basis values of each point accumulated into the banded normal equations, without the
+    (m, n) design matrix. The connector fit passes unit weights (its ``u`` in [0, 1]),
+    ``lanes/follow.py`` the metres driven per point (its ``u`` the axis distance)."""
     n = len(knots) - 4
-    BtB, BtQ = np.zeros((n, n)), np.zeros((n, 2))
+    BtB, BtQ = np.zeros((n, n)), np.zeros((n, Q.shape[1]))
     vals = np.empty(4)
+    lo, hi = knots[0], knots[-1]
     for i in range(len(Q)):
-        f = _basis(min(max(u[i], 0.0), 1.0), knots, n, vals)
+        f = _basis(min(max(u[i], lo), hi), knots, n, vals)
         for a in range(4):
-            BtQ[f + a, 0] += vals[a] * Q[i, 0]
-            BtQ[f + a, 1] += vals[a] * Q[i, 1]
+            wa = w[i] * vals[a]
+            for d in range(Q.shape[1]):
+                BtQ[f + a, d] += wa * Q[i, d]
             for c in range(4):
-                BtB[f + a, f + c] += vals[a] * vals[c]
+                BtB[f + a, f + c] += wa * vals[c]
     return BtB, BtQ
 
 
@@ -298,8 +304,9 @@ def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, c
     ctrl = np.empty((n, 2))
     u, u_try, u_best = u0.copy(), np.empty(len(Q)), np.empty(len(Q))
     rhs = np.empty((nz, nz + 1))
+    ones = np.ones(len(Q))
     for it in range(iters + 1):
-        BtB, BtQ = _data(Q, u, knots)
+        BtB, BtQ = _data(Q, u, knots, ones)
         _reduce(BtB, BtQ, c0, c1, t0, t1, G, g)
         best = np.inf
         for w in weights:

@@ -1,5 +1,5 @@
 """Reference of the compiled normal equations of :func:`intersection_estimator.lanes.follow.fit_offset`:
-the scipy design matrix and dense products it replaced."""
+the scipy design matrix and dense products it replaced (now ``spline._data``)."""
 
 from __future__ import annotations
 
