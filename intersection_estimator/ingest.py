@@ -353,10 +353,9 @@ def _plausible(a: EgoPose, b: EgoPose) -> bool:
     return dt >= -1.0 and math.hypot(b.x - a.x, b.y - a.y) <= MAX_EGO_SPEED * min(abs(dt), EGO_DT_MAX) + EGO_SLACK
 
 
-def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None, budget_s: float | None = None,
-         lanes_reserve_s: float = 0.0):
+def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None, budget_s: float | None = None):
     """One estimation tick as node and replay both run it: next intersection, then estimate
-    (``budget_s``, ``lanes_reserve_s``: see :meth:`~.pipeline.OnlineEstimator.tick`).
+    (``budget_s``: see :meth:`~.pipeline.OnlineEstimator.tick`).
 
     Returns the :class:`~.pipeline.EstimateResult`, or None before the first message.
     """
@@ -369,5 +368,4 @@ def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None, budget_s: fl
             log('ego passed the intersection: starting on the next one')
         estimator.reset()
         ingest.forget_before(now)
-    return estimator.tick(now, wall_budget=wall_budget, budget_s=budget_s,
-                          lanes_reserve_s=lanes_reserve_s)
+    return estimator.tick(now, wall_budget=wall_budget, budget_s=budget_s)

@@ -8,6 +8,7 @@ be read at any time.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field, replace
 import threading
 import time
@@ -235,8 +236,7 @@ class OnlineEstimator:
         self._lanes = LaneCourseEstimator(self.config.lanes, rng_lanes)
         self._lane_key = None
         self._lane_t = -np.inf
-        self._init_s: list[float] = []    # [s] the last INIT_COSTS lane initialisations + refinements
-        self._refine_s = 0.0              # [s] the last lane refinement (after the sampler)
+        self._init_s = deque(maxlen=INIT_COSTS)   # [s] recent lane initialisations + refinements
         self._dirty = False
         self._idle_ticks = 0              # ticks since the last new observations
         self._approached = False
@@ -330,16 +330,16 @@ class OnlineEstimator:
             self._approached = True
         return self._approached and along > self.config.reset_distance
 
-    def tick(self, now: float, *, wall_budget: bool = False, budget_s: float | None = None,
-             lanes_reserve_s: float = 0.0) -> EstimateResult:
+    def tick(self, now: float, *, wall_budget: bool = False,
+             budget_s: float | None = None) -> EstimateResult:
         """Spend one tick's budget on the current window and return the best estimate.
 
         In wall mode the budget (``budget_s``, default ``config.budget_s``) covers the whole
         tick -- preprocessing, chain restarts and lane initialisation included: the topology
         chain runs until ``1 - lane_share`` of it has passed, the lane course until its end
         (each gets at least ``MIN_SHARE`` of it, so that data growing faster than the
-        machine cannot starve the sampler). A tick that re-estimates the lane course ends
-        ``lanes_reserve_s`` earlier: the caller's time to publish the new lanelets.
+        machine cannot starve the sampler). The caller leaves room for publishing in
+        ``budget_s`` (the node: ``IntersectionEstimatorNode._publish_lanes_now``).
         The lane course's initialisation (§III-A) cannot stop at a deadline, so the
         topology first runs only until that initialisation, at its recent cost, would still
         end in time; when the lane course is due this tick it stops there, else it goes on
@@ -371,16 +371,15 @@ class OnlineEstimator:
             else:
                 self._topo.run(n_samples=cfg.topology_samples)
         else:
-            self._topology_phase(dets, restart, now, topo_end, deadline - lanes_reserve_s
-                                 - self._init_cost_s() - MIN_SHARE * total, total)
+            self._topology_phase(dets, restart, now, topo_end,
+                                 deadline - self._init_cost_s() - MIN_SHARE * total, total)
         t1 = time.perf_counter()
         best = self._topo.best
         # before the lane step, whose wall deadline then absorbs it (at lane cadence)
         if dirty and now - self._obs_t >= cfg.lane_period or self._observability is None:
             self._observability, self._obs_t = assess(dets), now
         t2 = time.perf_counter()
-        lanelets = self._tick_lanes(best, dets, now, deadline - lanes_reserve_s if wall_budget else None,
-                                    total)
+        lanelets = self._tick_lanes(best, dets, now, deadline if wall_budget else None, total)
         if best is not None:
             with_support(best, lanelets, self._lanes.lane_support()
                          if self._lane_key and cfg.lanes_enabled and dets.has_tracks else None)
@@ -472,21 +471,19 @@ class OnlineEstimator:
             self._lanes_updated = False
             return self._lanes.lanelets
         self._lane_t = now
-        fixed = 0.0
+        timings = self._lanes.timings            # the lane estimator's own timers [s]
         if step == 'initialise':
-            t = time.perf_counter()
             self._lanes.initialise(best, dets)
-            fixed = time.perf_counter() - t
             self._lane_key = _topology_key(best)
         if deadline is not None:
-            # the sampler stops at the deadline; the refinement after it (§III-C) does not
-            self._lanes.run(time_budget_s=max(_left(deadline, total) - self._refine_s,
+            # the sampler stops at the deadline; the refinement after it (§III-C), at its
+            # last cost, does not
+            self._lanes.run(time_budget_s=max(_left(deadline, total) - timings.get('refine', 0.0),
                                               MIN_SHARE * total))
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
-        self._refine_s = self._lanes.timings.get('refine', 0.0)
         if step == 'initialise':
-            self._init_s = (self._init_s + [fixed + self._refine_s])[-INIT_COSTS:]
+            self._init_s.append(timings['initialise'] + timings.get('refine', 0.0))
         return self._lanes.lanelets
 
 
