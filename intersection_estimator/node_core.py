@@ -351,7 +351,8 @@ class EstimatorCore:
             return
         from msg_adapters.map_changes import map_change_markers, map_changes_msg
         from .fleet.live import LiveReport
-        report = LiveReport(None) if result is None else self.prior.update(result.intersection, result.lanelets)
+        report = LiveReport(None) if result is None else self.prior.update(result.intersection, result.lanelets,
+                                                                           self.estimator.window())
         self.pub_map_changes.publish(map_changes_msg(self.types, header, report))
         markers, self._change_keys = map_change_markers(self.types, header, report, self._change_keys)
         if markers.markers:

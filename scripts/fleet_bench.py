@@ -41,6 +41,7 @@ import numpy as np
 
 from intersection_estimator.export.osm import write_osm
 from intersection_estimator.fleet.changes import ChangeConfig, compare
+from intersection_estimator.fleet.corroborate import match_traffic, tracks_of
 from intersection_estimator.fleet.edits import EDITS, EXPECTED, apply_edit, drive_variant
 from intersection_estimator.fleet.fuse import fuse
 from intersection_estimator.fleet.prior_map import load_prior_map
@@ -169,6 +170,11 @@ def _maps(seed: int, sc, tmp: Path) -> dict:
     return out
 
 
+def _traffic(tracks, X):
+    """The drive's vehicles map-matched to ``X`` (None: not corroborated)."""
+    return match_traffic(tracks, X, CFG.match_gate_m, CFG.match_min_points) if tracks else None
+
+
 def _case_rows(seed: int, tmp: Path) -> list[dict]:
     sc = _scenario(seed)
     r = _estimate(sc, seed)
@@ -177,7 +183,8 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
                  'false_incl_unused': False, 'claimed': []} for e in ('none',) + EDITS]
     rows = []
     maps = _maps(seed, sc, tmp)
-    view = compare(r.intersection, r.lanelets, maps['none'][1], CFG)
+    tracks = tracks_of(sc.detections('tracked')) if CFG.corroborate else []
+    view = compare(r.intersection, r.lanelets, maps['none'][1], CFG, _traffic(tracks, maps['none'][1]))
     rows.append({'seed': seed, 'edit': 'none', 'applicable': True, 'observable': True, 'hit': not view.findings,
                  'false': any(f.kind != 'connector_unused' for f in view.findings),
                  'false_incl_unused': bool(view.findings), 'claimed': [f.key for f in view.findings]})
@@ -186,7 +193,7 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
         if X is None:
             rows.append({'seed': seed, 'edit': edit, 'applicable': False})
             continue
-        fs = compare(r.intersection, r.lanelets, X, CFG).findings
+        fs = compare(r.intersection, r.lanelets, X, CFG, _traffic(tracks, X)).findings
         hits = [f for f in fs if _hit(edit, what, f, X, sc)]
         others = [f for f in fs if f not in hits[:1]]
         rows.append({'seed': seed, 'edit': edit, 'applicable': True, 'observable': _observable(edit, what, sc),
@@ -219,10 +226,12 @@ def _fusion_case(seed: int, edit: str, drives: int, share: float, tmp: Path):
     X, X0 = _prior(lls, tmp), _prior(sc.gt_lanelets, tmp)
     views, views0 = [], []
     for d in range(1, drives + 1):
-        r = _estimate(drive_variant(sc, d, share), seed * 100 + d)
+        drive = drive_variant(sc, d, share)
+        r = _estimate(drive, seed * 100 + d)
         if r.intersection is not None:
-            views.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X, CFG)))
-            views0.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X0, CFG)))
+            tracks = tracks_of(drive.detections('tracked')) if CFG.corroborate else []
+            views.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X, CFG, _traffic(tracks, X))))
+            views0.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X0, CFG, _traffic(tracks, X0))))
     return sc, X, X0, what, views, views0
 
 

@@ -54,10 +54,12 @@ import math
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.special import hyp2f1
 
 from ..evaluate import lane_distance
 from ..model import ENTERING, LEAVING
 from ..ranges import check_table
+from .corroborate import refutes
 from .match import ARM_GATE_DEG, GATE_M, match_arms
 
 __all__ = ['KINDS', 'ChangeConfig', 'Finding', 'DriveView', 'compare', 'arm_passages']
@@ -73,7 +75,11 @@ _RANGES = {'gate_m': ('(0, inf)', 'estimate <-> mapped intersection gate [m]'),
            'absence_prior': ('(0, 1)', 'prior probability that an element without traffic is gone'),
            'min_confidence': ('(0, 1)', 'fused confidence to report a change'),
            'change_prior': ('(0, 1)', 'prior probability of a positive change (added / moved)'),
-           'share_concentration': ('[0, inf)', 'spread of traffic shares in the absence model (0: off)')}
+           'share_concentration': ('[0, inf)', 'spread of traffic shares in the absence model (0: off)'),
+           'turn_absence': ('[0, 1]', "1: a missing lane's evidence is the vehicles of the turns it serves"),
+           'corroborate': ('[0, 1]', "1: claims the drive's map-matched vehicles contradict are dropped"),
+           'match_gate_m': ('(0, inf)', 'a vehicle is on a mapped lane within this lateral distance [m]'),
+           'match_min_points': ('[1, inf)', 'positions (1 s averages) that make a vehicle a lane\'s traffic')}
 
 
 @dataclass(frozen=True)
@@ -93,6 +99,14 @@ class ChangeConfig:
     # SUMO arms 62, Table I under-dispersed. Default 0 (see docs/fleet.md: 3 costs Table I's
     # lane_removed recall 98 -> 55 %)
     share_concentration: float = 0.0
+    # a mapped lane serves its mapped turns: only vehicles of those turns can show it missing
+    # (_lane_absence; 0 = any vehicle of the direction, the rule before)
+    turn_absence: int = 1
+    # the drive's vehicles map-matched to the mapped lanes drop the claims they contradict
+    # (corroborate.py); needs tracked input (raw radar: nothing to match)
+    corroborate: int = 1
+    match_gate_m: float = 1.75
+    match_min_points: int = 5
 
     def validate(self) -> None:
         check_table(self, _RANGES, 'ChangeConfig')
@@ -206,20 +220,27 @@ def _lane_conf(lanes) -> float:
     return 1.0 - math.exp(-sum(l.support for l in lanes) / 3.0)
 
 
-def _absence(kind, key, passages, share, cfg, **kw) -> Finding:
-    """An absence finding: ``P`` passages that all missed an element taking ``share`` of them.
+def _absence_llr(passages: float, share: float, cfg) -> float:
+    """Log LR "gone : still there" of ``passages`` that all missed an element taking ``share``
+    of them (:func:`_absence`)."""
+    share = min(max(share, 1e-9), 1.0 - 1e-9)
+    k = cfg.share_concentration
+    if k > 0:
+        a, b = share * k, (1.0 - share) * k
+        return -(math.lgamma(b + passages) + math.lgamma(a + b) - math.lgamma(b) - math.lgamma(a + b + passages))
+    return -passages * math.log1p(-share)
+
+
+def _absence(kind, key, passages, share, cfg, llr=None, **kw) -> Finding:
+    """An absence finding: ``P`` passages that all missed an element taking ``share`` of them
+    (``llr``: the log likelihood ratio when the caller composed it, :func:`_lane_absence`).
 
     Shares vary from element to element (real demand leaves lanes and turns almost empty),
     so the element's share is ``f ~ Beta(k share, k (1 - share))`` (``k`` =
     ``share_concentration``) and "no passage on it although it exists" has probability
     ``E[(1 - f)^P] = B(a, b + P) / B(a, b)``; ``k = 0``: exactly ``(1 - share)^P``."""
     share = min(max(share, 1e-9), 1.0 - 1e-9)
-    k = cfg.share_concentration
-    if k > 0:
-        a, b = share * k, (1.0 - share) * k
-        llr = -(math.lgamma(b + passages) + math.lgamma(a + b) - math.lgamma(b) - math.lgamma(a + b + passages))
-    else:
-        llr = -passages * math.log1p(-share)
+    llr = _absence_llr(passages, share, cfg) if llr is None else llr
     prior = math.log(cfg.absence_prior / (1.0 - cfg.absence_prior))
     conf = 1.0 / (1.0 + math.exp(-min(max(llr + prior, -50.0), 50.0)))
     ev = {'passages': passages, 'share': share, **kw.pop('evidence', {})}
@@ -311,9 +332,11 @@ def _with_traffic(el) -> list:
 
 
 def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                   ident) -> list:
+                   ident, moves, p_dirs=None) -> list:
     """Lane findings of estimated arm ``e`` against mapped arm ``m``; ``ident``: that arm
-    pair's :func:`_lane_identity`."""
+    pair's :func:`_lane_identity`; ``moves``: :func:`_movements`; ``p_dirs``: the passages of
+    each (arm, direction) when the traffic was counted on the map (else from the arm's
+    confidence)."""
     out = []
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
@@ -344,9 +367,12 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
             # lanes of one arm do not add up to one lane "removed", and a drive that drove the
             # lane refutes it (DriveView.lanes_seen)
             p_dir = pas[e] * len(ml) / max(len(marm.lanes_in) + len(marm.lanes_out), 1)
+            if p_dirs is not None:
+                p_dir = p_dirs.get((e, d), 0.0)
+            index = {l.id: j for j, l in enumerate(ml)}
             for g in gone:
-                out.append(_absence('lane_removed', f'lane_removed:{g}', p_dir, 1.0 / len(ml),
-                                    cfg, map_arm=m, direction=ds, map_lanes=[g], evidence=ev))
+                out.append(_lane_absence(g, index[g], m, d, p_dir, len(ml), mapped,
+                                         moves.get((e, d), {}), cfg, map_arm=m, direction=ds, evidence=ev))
         else:
             counts_ok.add((m, ds))
             # the mapped lane each estimated lane is by position (not its index: a lane in
@@ -365,6 +391,88 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
                                                    'support': int(el_k.support)}))
     return out
 
+
+def _movements(by_id: dict, amap: dict) -> dict:
+    """``(estimated arm, direction) -> {mapped arm: vehicles}``: where the drive's vehicles of
+    that arm direction went to (entering) or came from (leaving), from the estimated
+    connectors and the vehicles that took them (``support``; paper §III: connectors exist only
+    where trajectories drove them)."""
+    out: dict = {}
+    for l in by_id.values():
+        if l.kind != 'connector' or l.arm not in amap or l.arm_to not in amap:
+            continue
+        for (e, d, other) in ((l.arm, ENTERING, amap[l.arm_to]), (l.arm_to, LEAVING, amap[l.arm])):
+            per = out.setdefault((e, d), {})
+            per[other] = per.get(other, 0.0) + float(l.support)
+    return out
+
+
+def _served(mapped, m: int, d: int) -> dict:
+    """Mapped lane index of arm ``m``, direction ``d`` -> the mapped arms its mapped turns lead
+    to (entering) or come from (leaving)."""
+    out: dict = {}
+    for c in mapped.connectors:
+        a, i, b, j = c.key
+        if d == ENTERING and a == m:
+            out.setdefault(i, set()).add(b)
+        elif d == LEAVING and b == m:
+            out.setdefault(j, set()).add(a)
+    return out
+
+
+#: Dirichlet pseudo count per mapped turn of a direction in the drive's turn shares (Jeffreys)
+MOVE_PRIOR = 0.5
+
+
+def _unknown_turn_llr(passages: float, a: float, b: float, h: float) -> float:
+    """Log LR "gone" of ``passages`` whose turns were not seen, all of which missed a lane that
+    takes a share ``h * pi`` of them, ``pi ~ Beta(a, b)`` the share of the turns it serves:
+    ``-ln E[(1 - h pi)^P] = -ln 2F1(-P, a; a + b; h)`` (``h = 1``: ``B(a, b + P) / B(a, b)``)."""
+    if passages <= 0.0:
+        return 0.0
+    return -math.log(max(float(hyp2f1(-passages, a, a + b, min(h, 1.0))), 1e-300))
+
+
+def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, **kw) -> Finding:
+    """``lane_removed`` for mapped lane ``j`` of arm ``m``, direction ``d``: the absence
+    likelihood of the passages that *could* have used it.
+
+    A lane serves the turns the map gives it, and a vehicle takes a lane that leads where it
+    goes. Real demand is lumpy over turns: SUMO leaves 24 % of the lanes of a used direction
+    without a vehicle, most of them lanes of turns nobody took in the recording. So:
+
+    * the ``K_b`` vehicles seen taking a turn ``b`` the lane serves (estimated connectors)
+      each missed a lane taking ``1 / n_b`` of that turn (``n_b`` mapped lanes of the
+      direction serve ``b``): ``(1 - 1 / n_b)^K_b``; a vehicle seen taking another turn
+      says nothing about the lane;
+    * the direction's other ``U = p_dir - sum_b K_b`` passages (turn not seen) took the
+      lane's turns with share ``pi ~ Beta(A, B)`` -- the turn shares of the drive are
+      ``Dirichlet(MOVE_PRIOR + K)`` over the mapped turns, ``A`` summed over the lane's
+      turns, ``B`` over the others -- and then this lane with probability ``h`` (the
+      ``1 / n_b`` averaged over its turns): :func:`_unknown_turn_llr`.
+
+    A mapped lane without mapped turns could have taken any vehicle of its direction:
+    ``(1 - 1 / n_lanes)^p_dir``, the rule before."""
+    served = _served(mapped, m, d) if cfg.turn_absence else {}
+    mine = served.get(j, set())
+    if not mine:
+        return _absence('lane_removed', f'lane_removed:{lane_id}', p_dir, 1.0 / n_lanes, cfg,
+                        map_lanes=[lane_id], **kw)
+    offered = set().union(*served.values())
+    n_b = {b: sum(b in s for s in served.values()) for b in offered}
+    k = {b: moves.get(b, 0.0) for b in offered}
+    known = sum(k.values())
+    unknown = max(p_dir - known, 0.0)
+    A = sum(k[b] + MOVE_PRIOR for b in mine)
+    B = sum(k[b] + MOVE_PRIOR for b in offered - mine)
+    h = sum((k[b] + MOVE_PRIOR) / n_b[b] for b in mine) / A
+    llr = sum(_absence_llr(k[b], 1.0 / n_b[b], cfg) for b in mine) + _unknown_turn_llr(unknown, A, B, h)
+    share = h * A / (A + B)
+    passages = sum(k[b] for b in mine) + unknown * share
+    kw['evidence'] = {**kw.get('evidence', {}), 'turns_served': sorted(mine), 'passages_turns': known,
+                      'vehicles_its_turns': sum(k[b] for b in mine), 'passages_unknown_turn': unknown}
+    return _absence('lane_removed', f'lane_removed:{lane_id}', passages, share, cfg, llr=llr,
+                    map_lanes=[lane_id], **kw)
 
 def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_ok, used, ident) -> list:
     """Turns in *mapped* lane indices: an estimated connector's entering and leaving lanes are
@@ -409,8 +517,11 @@ def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_o
     return out
 
 
-def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveView:
-    """Findings of one estimate (``model.Intersection`` + lanelets) against ``mapped``."""
+def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=None) -> DriveView:
+    """Findings of one estimate (``model.Intersection`` + lanelets) against ``mapped``;
+    ``traffic``: the drive's vehicles map-matched to ``mapped``
+    (:func:`.corroborate.match_traffic`), which drop the findings they contradict and add
+    the lanes and turns they drove to the drive's refutations."""
     conf = [float(a.confidence) for a in est.arms]
     pas = [arm_passages(c) for c in conf]
     amap = match_arms([a.angle for a in est.arms], [a.angle for a in mapped.arms], cfg.arm_gate_deg)
@@ -418,10 +529,20 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig()) -> DriveV
     lanes, by_id = _est_lanes(lanelets)
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
     ident = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
+    moves = _movements(by_id, amap)
+    p_dirs = None
+    if traffic is not None:       # the turns and passages the vehicles showed on the map itself
+        moves = {(e, d): traffic.moves.get((m, d), {}) for e, m in amap.items() for d in (ENTERING, LEAVING)}
+        p_dirs = {(e, d): float(traffic.passages.get((m, d), 0)) for e, m in amap.items()
+                  for d in (ENTERING, LEAVING)}
     for e, m in sorted(amap.items()):
         findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                                   ident[e])
+                                   ident[e], moves, p_dirs)
     findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used, ident)
+    if traffic is not None:
+        findings = [f for f in findings if not refutes(f, traffic, mapped, cfg.moved_m, cfg.arm_gate_deg)]
+        lanes_seen.update(l for l, n in traffic.vehicles.items() if n >= 1)
+        used.update(c.id for c in mapped.connectors if (c.lane_in, c.lane_out) in traffic.turns)
     total = float(sum(pas))
     weak = sorted((f for f in findings if f.confidence <= 0.5), key=lambda f: f.key)
     return DriveView(intersection=mapped.id, findings=sorted((f for f in findings if f.confidence > 0.5),

@@ -50,7 +50,8 @@ def _cmd(args) -> int:
     from .prior_map import PriorMapError
     from .report import summary_lines
     try:
-        cfg = ChangeConfig(moved_m=args.moved_m, min_confidence=args.min_confidence)
+        cfg = ChangeConfig(moved_m=args.moved_m, min_confidence=args.min_confidence,
+                           corroborate=int(not args.no_corroborate), turn_absence=int(not args.any_lane_absence))
         doc = run_fleet(args.bags, args.map, args.out, engine=args.engine, workers=args.workers,
                         address=args.address, params_file=args.params, origin=tuple(args.origin),
                         projector=args.projector, cfg=cfg, progress=not args.quiet)
@@ -78,6 +79,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--projector', choices=('local', 'utm'), default='local')
     p.add_argument('--moved-m', type=float, default=0.75, help='lane moved beyond this offset [m]')
     p.add_argument('--min-confidence', type=float, default=0.5, help='fused confidence to report')
+    p.add_argument('--no-corroborate', action='store_true',
+                   help="keep claims the drive's map-matched vehicles contradict (the estimate alone)")
+    p.add_argument('--any-lane-absence', action='store_true',
+                   help='a missing lane: every vehicle of its direction counts, not only those of its turns')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=_cmd)
     return p

@@ -62,7 +62,32 @@ def _lane_added(lls, rng, gt, traffic):
     n = -_normal(outer) * gt.traffic_side
     _shift(new, n * w)
     new.id, new.lane_index, new.successors = f'{outer.id}_extra', outer.lane_index + 1, []
-    return lls + [new], {'arm': a, 'kind': kind}
+    return lls + [new] + _copied_turns(lls, outer, new, n * w), {'arm': a, 'kind': kind}
+
+
+def _copied_turns(lls, outer, new, vec) -> list:
+    """The turns of ``outer`` copied for the added lane ``new`` (``vec`` beside it): a mapped
+    lane leads somewhere, and a lane added next to a kerb lane serves its turns. Each copy is
+    the connector shifted by ``vec`` at the new lane's end, fading to 0 at its other end (as
+    in :func:`_lane_moved`), so it shares its end points with both lanes."""
+    out = []
+    for c in _lanes(lls, 'connector'):
+        if outer.kind == 'entering' and c.id in outer.successors:
+            w, into = np.linspace(1.0, 0.0, len(c.center)), None
+        elif outer.kind == 'leaving' and outer.id in c.successors:
+            w, into = np.linspace(0.0, 1.0, len(c.center)), next(l for l in lls if c.id in l.successors)
+        else:
+            continue
+        cc = copy.deepcopy(c)
+        _shift(cc, vec, w)
+        cc.id = f'{c.id}_extra'
+        if into is None:
+            new.successors.append(cc.id)
+        else:
+            cc.successors = [new.id]
+            into.successors = into.successors + [cc.id]
+        out.append(cc)
+    return out
 
 
 def _lane_removed(lls, rng, gt, traffic):

@@ -25,6 +25,7 @@ import sys
 import tempfile
 
 from .changes import ChangeConfig, compare
+from .corroborate import drive_traffic
 from .match import match_intersection
 
 __all__ = ['BagResult', 'bag_identity', 'seed_of', 'drive_estimates', 'process_bag', 'run', 'expand_bags']
@@ -64,12 +65,13 @@ def seed_of(identity: str) -> int:
 
 
 def drive_estimates(bag: str, seed: int, params_file: str | None = None):
-    """THE adapter to the replay API: ``([(Intersection, lanelets), ...], damage)`` for every
-    intersection the drive passed, in drive order."""
+    """THE adapter to the replay API: ``([(Intersection, lanelets, window), ...], damage)`` for
+    every intersection the drive passed, in drive order (``window``: the observations its
+    estimate rests on, for :func:`.corroborate.drive_traffic`)."""
     from ..replay import replay
     with tempfile.TemporaryDirectory(prefix='ie_fleet_') as tmp:
         s = replay([bag], tmp, params_file=params_file, seed=seed, progress=False, write_outputs=False)
-    ests = [(i.result.intersection, i.result.lanelets) for i in s.intersections
+    ests = [(i.result.intersection, i.result.lanelets, i.window) for i in s.intersections
             if i.result.intersection is not None]
     return ests, s.truncated
 
@@ -93,12 +95,12 @@ def process_bag(bag: str, mapped: list, params_file: str | None = None,
         return BagResult(name, ident, 'failed', _one_line(exc, bag))
     res = BagResult(name, ident, 'damaged' if damage else 'ok',
                     ' '.join(str(damage).split()).replace(str(bag), name))
-    for I, lls in ests:
+    for I, lls, window in ests:
         X = match_intersection(I.center, mapped, cfg.gate_m)
         if X is None:
             res.unmatched += 1
             continue
-        res.views.append(compare(I, lls, X, cfg))
+        res.views.append(compare(I, lls, X, cfg, drive_traffic(window, X, cfg)))
         res.estimates.append((X.id, [float(v) for v in I.center],
                               [l.center.tolist() for l in lls]))
     return res

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .changes import ChangeConfig, compare
+from .corroborate import drive_traffic
 from .fuse import FusedChange, fuse
 from .match import match_intersection
 from .prior_map import MappedIntersection, load_prior_map
@@ -50,14 +51,16 @@ class LiveChanges:
         :class:`.prior_map.PriorMapError` (a ValueError) with a one-line reason."""
         return cls(load_prior_map(path, origin=origin, projector=projector), cfg)
 
-    def update(self, intersection, lanelets) -> LiveReport:
+    def update(self, intersection, lanelets, window=None) -> LiveReport:
         """Compare an estimate (``model.Intersection`` + lanelets) with the nearest mapped
-        intersection; an estimate near none gives an empty report."""
+        intersection; an estimate near none gives an empty report. ``window``: the
+        observations the estimate rests on, whose vehicles, map-matched, drop the claims they
+        contradict (:mod:`.corroborate`)."""
         if intersection is None:
             return LiveReport(None)
         X = match_intersection(intersection.center, self.mapped, self.cfg.gate_m)
         if X is None:
             return LiveReport(None)
-        view = compare(intersection, lanelets, X, self.cfg)
+        view = compare(intersection, lanelets, X, self.cfg, drive_traffic(window, X, self.cfg))
         fused = fuse([(LIVE, view)], self.cfg)[X.id]
         return LiveReport(X, fused.changes, list(fused.unobserved), float(fused.passages))

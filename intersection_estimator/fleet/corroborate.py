@@ -1,0 +1,318 @@
+"""The drive's traffic against the map itself: does it corroborate what the estimate claims?
+(issue 17, beyond the estimate).
+
+A change is claimed from the difference between the estimate and the map. Where the
+estimator errs -- real junctions bend, lanes are added before the stop line, arms do not
+meet in one point -- that difference is the estimator's error, not the world's, and every
+such error reads as a change (``docs/fleet.md``). The vehicles themselves do not err that
+way: map-matched to the mapped lanes, they show where the traffic drove relative to the map,
+independent of the estimator's model. A claim the traffic contradicts is dropped:
+
+=====================  ==================================================================
+``lane_moved``         the vehicles on the mapped lane drive along its center line (median
+                       lateral offset below ``moved_m / 2``)
+``lane_removed``       a vehicle drove the mapped lane
+``lane_added``         no vehicle of that arm direction drove outside the mapped lanes
+``arm_removed``        a vehicle drove one of the mapped arm's lanes
+``arm_added``          no vehicle drove outside the mapped lanes in that direction
+``connector_added``    no vehicle went from the mapped entering lane to the mapped leaving
+                       lane of the claimed turn
+``connector_unused``   a vehicle took the mapped turn
+=====================  ==================================================================
+
+The claims a real change makes survive: a moved lane's vehicles drive beside its mapped
+center line, a lane or arm the map lacks carries traffic outside every mapped lane, a turn
+the map lacks is driven from one mapped lane to the other.
+
+Map matching (:func:`match_traffic`): a track's positions are averaged over ``SMOOTH_S``
+(tracked objects carry a metre of noise: single points would stray onto the lane beside,
+and a standing vehicle's noise would read as motion) and its heading is their displacement
+over ``HEADING_S`` (slower than ``MIN_SPEED``: no heading, not matched). Each position is
+matched to the nearest mapped lane or connector whose direction agrees (cos >
+``HEADING_COS``) within ``match_gate_m`` laterally. A vehicle drove a lane when
+``min_points`` of its positions matched it; its passage of an arm direction and its turn
+come from the lane most of its positions matched there (a connector's turn when only one
+side was seen). Positions outside the box (farther from the mapped center than the
+nearest lane end) and within the map's reach that match nothing are *off the map*; a
+vehicle with ``min_points`` of them drove outside the mapped lanes, at the arm sector and
+in the direction (towards / away from the center) of those positions. Cyclists and
+pedestrians (``SKIP_LABELS``) are not lane traffic and are left out.
+
+The vehicles' turns on the map also give the turn counts of the lane-absence rule
+(``changes._lane_absence``) when the drive is corroborated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..model import ENTERING, LEAVING
+
+__all__ = ['TrafficOnMap', 'match_traffic', 'refutes', 'tracks_of', 'drive_traffic', 'HEADING_S', 'HEADING_COS',
+           'STEP_M']
+
+HEADING_S = 2.0        # a point's heading: its track's displacement over this time [s]
+SMOOTH_S = 1.0         # ... of its positions averaged over this time [s]
+MIN_SPEED = 2.0        # slower points have no reliable heading and are not matched [m/s]
+HEADING_COS = 0.7      # a lane matches a point when their directions agree this well
+STEP_M = 0.5           # mapped center lines are sampled this densely for the matching [m]
+#: Autoware labels of road users that keep to no lane (bicycle, pedestrian; LaneConfig.skip_labels)
+SKIP_LABELS = (6, 7)
+REACH_GATE_DEG = 30.0   # a point belongs to the mapped arm this close in angle for the map's reach
+
+
+@dataclass
+class TrafficOnMap:
+    """What one drive's vehicles did on one mapped intersection."""
+
+    vehicles: dict = field(default_factory=dict)    # mapped lane id -> vehicles that drove it
+    offset_m: dict = field(default_factory=dict)    # mapped lane id -> median lateral offset (left +)
+    turns: set = field(default_factory=set)         # (mapped entering lane id, leaving lane id) driven
+    off_map: list = field(default_factory=list)     # (angle [rad] about the center, direction) per vehicle
+    passages: dict = field(default_factory=dict)    # (mapped arm, direction) -> vehicles on its lanes
+    moves: dict = field(default_factory=dict)       # (mapped arm, direction) -> {other arm: vehicles}
+
+
+@dataclass(frozen=True)
+class _Element:
+    """A mapped lane or connector as the matching sees it."""
+
+    id: str
+    arm: int
+    direction: int           # ENTERING / LEAVING; 0 for a connector
+    center: np.ndarray
+    turn: tuple = ()         # a connector's (entering lane id, leaving lane id)
+
+
+def _elements(mapped) -> list:
+    out = [_Element(l.id, a.index, l.direction, np.asarray(l.center, float))
+           for a in mapped.arms for l in a.lanes_in + a.lanes_out]
+    return out + [_Element(c.id, c.key[0], 0, np.asarray(c.center, float), (c.lane_in, c.lane_out))
+                  for c in mapped.connectors]
+
+
+def _samples(elements):
+    """Dense samples of the elements' center lines: points, unit tangents, element index,
+    is-an-end flags."""
+    pts, tan, idx, end = [], [], [], []
+    for i, el in enumerate(elements):
+        c = el.center
+        seg = np.hypot(*np.diff(c, axis=0).T)
+        s = np.concatenate([[0.0], np.cumsum(seg)])
+        if len(c) < 2 or s[-1] <= 0:
+            continue
+        q = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / STEP_M)) + 1))
+        p = np.stack([np.interp(q, s, c[:, 0]), np.interp(q, s, c[:, 1])], axis=1)
+        t = np.gradient(p, axis=0)
+        t /= np.maximum(np.hypot(*t.T), 1e-9)[:, None]
+        pts.append(p)
+        tan.append(t)
+        idx.append(np.full(len(p), i))
+        e = np.zeros(len(p), bool)
+        e[[0, -1]] = True
+        end.append(e)
+    if not pts:
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, bool)
+    return np.concatenate(pts), np.concatenate(tan), np.concatenate(idx), np.concatenate(end)
+
+
+def _window(t: np.ndarray, half: float):
+    return (np.clip(np.searchsorted(t, t - half, 'left'), 0, len(t) - 1),
+            np.clip(np.searchsorted(t, t + half, 'right') - 1, 0, len(t) - 1))
+
+
+def _smoothed(xy: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The track's positions averaged over ``SMOOTH_S`` (sensor noise of a metre would put a
+    vehicle's single points on the lane beside it, and a standing vehicle's noisy positions
+    read as motion in a random direction)."""
+    lo, hi = _window(t, 0.5 * SMOOTH_S)
+    c = np.vstack([np.zeros((1, 2)), np.cumsum(xy, axis=0)])
+    return (c[hi + 1] - c[lo]) / (hi - lo + 1)[:, None]
+
+
+def _headings(m: np.ndarray, t: np.ndarray):
+    """Unit travel direction per (smoothed) point: displacement over ``HEADING_S``; NaN where
+    slower than ``MIN_SPEED``."""
+    j_lo, j_hi = _window(t, 0.5 * HEADING_S)
+    d = m[j_hi] - m[j_lo]
+    dt = t[j_hi] - t[j_lo]
+    v = np.hypot(*d.T) / np.where(dt > 0, dt, np.inf)
+    u = d / np.maximum(np.hypot(*d.T), 1e-9)[:, None]
+    u[(v < MIN_SPEED) | (dt < 0.5 * HEADING_S)] = np.nan
+    return u
+
+
+def _box_radius(mapped) -> float:
+    """Distance from the mapped center of the nearest lane end (inside: the box)."""
+    ends = [np.hypot(*(np.asarray(l.center[-1] if l.direction == ENTERING else l.center[0]) - mapped.center))
+            for a in mapped.arms for l in a.lanes_in + a.lanes_out]
+    return max(min(ends), 5.0) if ends else 5.0
+
+
+def _reach(mapped, phi: np.ndarray, gate: float) -> np.ndarray:
+    """How far from the center the map covers the road at angles ``phi``: the shortest far
+    end of the lanes of the mapped arm within ``gate``, else the longest of all (traffic
+    beyond a mapped lane's far end is not off the map, only beyond the map's extent)."""
+    far = np.array([min((np.hypot(*(np.asarray(l.center[0] if l.direction == ENTERING else l.center[-1])
+                                    - mapped.center)) for l in a.lanes_in + a.lanes_out), default=0.0)
+                    for a in mapped.arms])
+    if not len(far):
+        return np.zeros(len(phi))
+    ang = np.array([a.angle for a in mapped.arms])
+    diff = np.abs(np.remainder(phi[:, None] - ang[None] + math.pi, 2 * math.pi) - math.pi)
+    near = diff.argmin(1)
+    return np.where(diff[np.arange(len(phi)), near] <= gate, far[near], far.max())
+
+
+def _match_points(xy: np.ndarray, u: np.ndarray, tree, T, I, E, gate_m: float):
+    """Per point: the matched element (-1: none) and the signed lateral offset to it."""
+    k = min(8, tree.n)
+    j = tree.query(xy, k=k)[1].reshape(len(xy), k)
+    rel = xy[:, None, :] - tree.data[j]
+    along = np.einsum('nkd,nkd->nk', rel, T[j])
+    lat = T[j][..., 0] * rel[..., 1] - T[j][..., 1] * rel[..., 0]         # left of the lane > 0
+    agree = np.einsum('nd,nkd->nk', np.nan_to_num(u), T[j]) > HEADING_COS
+    beyond = E[j] & (np.abs(along) > STEP_M)                             # past an element's end
+    ok = agree & ~beyond & (np.abs(lat) <= gate_m) & np.isfinite(u[:, :1])
+    score = np.where(ok, np.abs(lat), np.inf)
+    rows = np.arange(len(xy))
+    best = score.argmin(1)
+    hit = np.isfinite(score[rows, best])
+    return np.where(hit, I[j[rows, best]], -1), lat[rows, best]
+
+
+def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMap:
+    """Map-match ``tracks`` (``[(xy (n, 2), t (n,)), ...]`` sorted by time, fixed frame) to
+    the lanes and connectors of ``mapped`` (module doc)."""
+    out = TrafficOnMap()
+    elements = _elements(mapped)
+    P, T, I, E = _samples(elements)
+    tracks = [(xy, t) for xy, t in tracks if len(xy) >= min_points]
+    if not len(P) or not tracks:
+        return out
+    xy = np.concatenate([_smoothed(x, t) for x, t in tracks])
+    u = np.concatenate([_headings(_smoothed(x, t), t) for x, t in tracks])
+    match, lat = _match_points(xy, u, cKDTree(P), T, I, E, gate_m)
+    radial = xy - mapped.center
+    r = np.hypot(*radial.T)
+    outside = (match < 0) & np.isfinite(u[:, 0]) & (r > _box_radius(mapped))
+    outside &= r < _reach(mapped, np.arctan2(radial[:, 1], radial[:, 0]), math.radians(REACH_GATE_DEG))
+    arm_of = {el.id: el.arm for el in elements if el.direction}
+    cuts = np.cumsum([len(x) for x, _ in tracks])[:-1]
+    for m, off, o, rad, rr, uu in zip(*(np.split(v, cuts) for v in (match, lat, outside, radial, r, u))):
+        _count(out, elements, m, off, min_points, arm_of)
+        if o.sum() >= min_points:
+            phi = math.atan2(*np.sum(rad[o] / rr[o, None], axis=0)[::-1])
+            away = float(np.sum(uu[o] * rad[o] / rr[o, None])) > 0
+            out.off_map.append((phi, LEAVING if away else ENTERING))
+    return _finish(out)
+
+
+def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_points: int,
+           arm_of: dict) -> None:
+    """One vehicle's matched elements: every lane ``min_points`` of its positions matched (a
+    turn pocket's vehicle drives the through lane first) with their offsets; its passage of
+    each arm direction and its turn from the lane most of its positions matched there (its
+    entering lane and the leaving lane after it; the connector most of its positions matched
+    when it was seen on one side only)."""
+    n = {int(i): np.count_nonzero(match == i) for i in np.unique(match[match >= 0])}
+    top: dict = {}
+    for i, c in n.items():
+        key = (elements[i].arm, elements[i].direction)
+        if c >= min_points and c > n.get(top.get(key, -1), 0):
+            top[key] = i
+    for (arm, d), i in top.items():
+        if d:
+            out.passages[(arm, d)] = out.passages.get((arm, d), 0) + 1
+    for i, c in n.items():
+        if elements[i].direction and c >= min_points:
+            lid = elements[i].id
+            out.vehicles[lid] = out.vehicles.get(lid, 0) + 1
+            out.offset_m.setdefault(lid, []).append(off[match == i])
+    cons = [i for (_, d), i in top.items() if not d]
+    ins = [i for (_, d), i in top.items() if d == ENTERING]
+    outs = [i for (_, d), i in top.items() if d == LEAVING]
+    turn = None
+    if ins and outs:
+        last_in = max(ins, key=lambda i: np.flatnonzero(match == i).max())
+        after = [i for i in outs if np.flatnonzero(match == i).min() > np.flatnonzero(match == last_in).max()]
+        if after:
+            turn = (elements[last_in].id, elements[min(after, key=lambda i: np.flatnonzero(match == i).min())].id)
+    if turn is None and cons:
+        # seen on one side only: the mapped turn it followed (connectors from one lane overlap
+        # at their start, so the lanes decide where both were seen: a turn the map lacks
+        # must not read as the mapped turn beside it)
+        turn = elements[max(cons, key=lambda i: n[i])].turn
+    if turn is not None and turn[0] in arm_of and turn[1] in arm_of:
+        out.turns.add(turn)
+        a, b = arm_of[turn[0]], arm_of[turn[1]]
+        for key, other in (((a, ENTERING), b), ((b, LEAVING), a)):
+            per = out.moves.setdefault(key, {})
+            per[other] = per.get(other, 0) + 1
+
+
+def _finish(out: TrafficOnMap) -> TrafficOnMap:
+    """Median offsets from the per-vehicle point lists."""
+    out.offset_m = {k: float(np.median(np.concatenate(v))) if isinstance(v, list) else v
+                    for k, v in out.offset_m.items()}
+    return out
+
+
+def _off_map(traffic: TrafficOnMap, angle: float, direction, gate: float) -> int:
+    return sum(1 for phi, d in traffic.off_map
+               if abs(math.remainder(phi - angle, 2 * math.pi)) <= gate and (direction is None or d == direction))
+
+
+def refutes(f, traffic: TrafficOnMap, mapped, moved_m: float, arm_gate_deg: float) -> bool:
+    """Does the drive's traffic on the map contradict finding ``f`` (module table)?"""
+    gate = math.radians(arm_gate_deg)
+    if f.kind == 'lane_moved':
+        lid = f.map_lanes[0]
+        return traffic.vehicles.get(lid, 0) >= 1 and abs(traffic.offset_m[lid]) < 0.5 * moved_m
+    if f.kind == 'lane_removed':
+        return any(traffic.vehicles.get(l, 0) >= 1 for l in f.map_lanes)
+    if f.kind == 'lane_added':
+        d = ENTERING if f.direction == 'in' else LEAVING
+        return _off_map(traffic, mapped.arms[f.map_arm].angle, d, gate) == 0
+    if f.kind == 'arm_removed':
+        return any(traffic.vehicles.get(l, 0) >= 1 for l in f.map_lanes)
+    if f.kind == 'arm_added':
+        return _off_map(traffic, math.radians(f.evidence['angle_deg']), None, gate) == 0
+    if f.kind == 'connector_added':
+        return tuple(f.map_lanes) not in traffic.turns
+    if f.kind == 'connector_unused':
+        c = next((c for c in mapped.connectors if c.id == f.map_lanes[0]), None)
+        return c is not None and (c.lane_in, c.lane_out) in traffic.turns
+    return False
+
+
+def tracks_of(dets, skip_labels=SKIP_LABELS) -> list:
+    """``[(xy, t), ...]`` per track id (time-sorted) of a ``Detections`` window, without the
+    road users that do not drive lanes (``skip_labels``: cyclists ride beside the kerb lane,
+    pedestrians walk along it -- they would "drive" a mapped lane beyond it); ``[]`` when the
+    window has no identities (raw radar): then nothing can be corroborated."""
+    if dets is None or len(dets) == 0:
+        return []
+    ok = (dets.track_id >= 0) & np.isfinite(dets.xy).all(axis=1) & np.isfinite(dets.t)
+    ok &= ~np.isin(dets.label, np.asarray(skip_labels, np.int64))
+    if not ok.any():
+        return []
+    tid, xy, t = dets.track_id[ok], dets.xy[ok], dets.t[ok]
+    order = np.lexsort((t, tid))
+    tid, xy, t = tid[order], xy[order], t[order]
+    cuts = np.flatnonzero(np.diff(tid)) + 1
+    return [(x, y) for x, y in zip(np.split(xy, cuts), np.split(t, cuts))]
+
+
+def drive_traffic(window, mapped, cfg) -> TrafficOnMap | None:
+    """The vehicles of a drive's observation ``window`` (``Detections``) map-matched to
+    ``mapped`` with ``cfg`` (a ``ChangeConfig``); None when ``cfg.corroborate`` is off or the
+    window has no tracks (then the estimate alone speaks)."""
+    if not cfg.corroborate:
+        return None
+    tracks = tracks_of(window)
+    return match_traffic(tracks, mapped, cfg.match_gate_m, int(cfg.match_min_points)) if tracks else None

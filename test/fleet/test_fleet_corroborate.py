@@ -1,0 +1,121 @@
+"""The drive's vehicles map-matched to the prior map (fleet/corroborate.py, issue 17): what
+they drove is counted where the world's traffic was, claims they contradict are dropped,
+and a real change's claim survives."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from intersection_estimator.export.osm import write_osm
+from intersection_estimator.fleet.changes import ChangeConfig, Finding, compare
+from intersection_estimator.fleet.corroborate import drive_traffic, match_traffic, refutes, tracks_of
+from intersection_estimator.fleet.edits import apply_edit
+from intersection_estimator.fleet.prior_map import load_prior_map
+from intersection_estimator.pipeline import in_mode
+
+
+def _prior(tmp_path, lls):
+    (X,) = load_prior_map(write_osm(tmp_path / 'prior.osm', lls))
+    return X
+
+
+def _names(X):
+    return {l.id: l.name for a in X.arms for l in a.lanes_in + a.lanes_out}
+
+
+def test_vehicles_are_counted_on_the_lanes_the_world_used(tmp_path, cases):
+    """Against the case's own map: every lane two or more vehicles drove has matched traffic,
+    a lane nobody drove has none, and every matched turn is a mapped turn somebody took."""
+    sc, _ = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    tr = drive_traffic(sc.detections('tracked'), X, ChangeConfig())
+    names = _names(X)
+    for lid, name in names.items():
+        if sc.traffic.get(name, 0) >= 2:
+            assert tr.vehicles.get(lid, 0) >= 1, name
+        if sc.traffic.get(name, 0) == 0:
+            assert tr.vehicles.get(lid, 0) == 0, name
+    cons = {(c.lane_in, c.lane_out): c.name for c in X.connectors}
+    assert tr.turns and all(t in cons and sc.traffic.get(cons[t], 0) > 0 for t in tr.turns)
+    assert all(abs(o) < 0.3 for o in tr.offset_m.values())     # vehicles keep to the lane centers
+    assert tr.off_map == []                                      # nothing drives beside the map
+
+
+def test_a_moved_lane_keeps_its_claim_a_false_one_is_dropped(tmp_path, cases):
+    """A lane the map has 1 m off: its vehicles drive ~1 m beside it (claim kept). The same
+    claim against the right map is the estimator's error: the traffic drives on the mapped
+    center line and drops it."""
+    sc, r = cases[5]
+    lls, what = apply_edit(sc, 'lane_moved', np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    tr = drive_traffic(sc.detections('tracked'), X, ChangeConfig())
+    (f,) = compare(r.intersection, r.lanelets, X, ChangeConfig(), tr).findings
+    assert f.kind == 'lane_moved' and _names(X)[f.map_lanes[0]] == what['lane']
+    assert 0.75 < abs(tr.offset_m[f.map_lanes[0]]) < 1.3
+    X0 = _prior(tmp_path, sc.gt_lanelets)
+    tr0 = drive_traffic(sc.detections('tracked'), X0, ChangeConfig())
+    lid = next(i for i, n in _names(X0).items() if n == what['lane'])
+    false = Finding('lane_moved', f'lane_moved:{lid}', 0.9, map_lanes=[lid])
+    assert refutes(false, tr0, X0, 0.75, 30.0)
+
+
+def test_estimator_errors_are_not_claimed_with_the_traffic(tmp_path, cases):
+    """The estimate with one entering lane pushed 1.5 m sideways claims it moved; the drive's
+    vehicles, on the mapped lane, refute that -- and only with corroboration off is it claimed."""
+    sc, r = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    lanes = copy.deepcopy(r.lanelets)
+    l = next(l for l in lanes if l.kind == 'entering' and l.support > 0)
+    n = l.left[0] - l.center[0]
+    n = n / np.hypot(*n)
+    for name in ('left', 'right', 'center'):
+        setattr(l, name, getattr(l, name) + 1.5 * n)
+    claimed = compare(r.intersection, lanes, X).findings
+    assert 'lane_moved' in [f.kind for f in claimed]
+    tr = drive_traffic(sc.detections('tracked'), X, ChangeConfig())
+    assert compare(r.intersection, lanes, X, ChangeConfig(), tr).findings == []
+
+
+@pytest.mark.parametrize('edit, kind', [('lane_removed', 'lane_added'), ('arm_removed', 'arm_added'),
+                                        ('connector_removed', 'connector_added')])
+def test_real_changes_survive_the_traffic(tmp_path, cases, edit, kind):
+    """Traffic on a lane or arm the map lacks drives outside every mapped lane; a turn the map
+    lacks is driven from one mapped lane to the other: the expected claim is not dropped."""
+    sc, r = cases[5]
+    lls, what = apply_edit(sc, edit, np.random.default_rng(5))
+    X = _prior(tmp_path, lls)
+    tr = drive_traffic(sc.detections('tracked'), X, ChangeConfig())
+    found = [f.kind for f in compare(r.intersection, r.lanelets, X, ChangeConfig(), tr).findings]
+    assert found == [kind], (what, found)
+    if kind != 'connector_added':
+        assert tr.off_map
+
+
+def test_no_tracks_no_corroboration(tmp_path, cases):
+    """Raw radar (no identities) has no vehicles to match: the estimate alone speaks; with
+    corroboration switched off the window is not read."""
+    sc, _ = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    raw = in_mode(sc.detections('tracked'), 'raw')
+    assert tracks_of(raw) == [] and drive_traffic(raw, X, ChangeConfig()) is None
+    assert drive_traffic(sc.detections('tracked'), X, ChangeConfig(corroborate=0)) is None
+    assert match_traffic([], X, 1.75, 5).vehicles == {}
+
+
+def test_cyclists_and_pedestrians_are_not_lane_traffic(cases):
+    """Road users that keep to no lane (bicycle 6, pedestrian 7) are left out of the matching."""
+    sc, _ = cases[5]
+    d = sc.detections('tracked')
+    from dataclasses import replace
+    walkers = replace(d, label=np.full(len(d), 7, np.int16))
+    assert tracks_of(walkers) == [] and len(tracks_of(d)) > 0
+
+
+def test_bad_match_config_named():
+    with pytest.raises(ValueError, match='match_gate_m'):
+        ChangeConfig(match_gate_m=0.0).validate()
+    with pytest.raises(ValueError, match='corroborate'):
+        ChangeConfig(corroborate=2).validate()
