@@ -169,20 +169,28 @@ def _reach(mapped, phi: np.ndarray, gate: float) -> np.ndarray:
 
 
 def _match_points(xy: np.ndarray, u: np.ndarray, tree, T, I, E, gate_m: float):
-    """Per point: the matched element (-1: none) and the signed lateral offset to it."""
+    """Per point: the matched element (-1: none) and the signed lateral offset to it. Points
+    without a heading (standing) match nothing and are not looked up."""
+    match, lat = np.full(len(xy), -1), np.zeros(len(xy))
+    go = np.flatnonzero(np.isfinite(u[:, 0]))
+    if not len(go):
+        return match, lat
     k = min(8, tree.n)
-    j = tree.query(xy, k=k)[1].reshape(len(xy), k)
-    rel = xy[:, None, :] - tree.data[j]
-    along = np.einsum('nkd,nkd->nk', rel, T[j])
-    lat = T[j][..., 0] * rel[..., 1] - T[j][..., 1] * rel[..., 0]         # left of the lane > 0
-    agree = np.einsum('nd,nkd->nk', np.nan_to_num(u), T[j]) > HEADING_COS
-    beyond = E[j] & (np.abs(along) > STEP_M)                             # past an element's end
-    ok = agree & ~beyond & (np.abs(lat) <= gate_m) & np.isfinite(u[:, :1])
-    score = np.where(ok, np.abs(lat), np.inf)
-    rows = np.arange(len(xy))
+    j = tree.query(xy[go], k=k)[1].reshape(len(go), k)
+    Tj = T[j]
+    rel = xy[go, None, :] - tree.data[j]
+    along = np.einsum('nkd,nkd->nk', rel, Tj)
+    side = Tj[..., 0] * rel[..., 1] - Tj[..., 1] * rel[..., 0]           # left of the lane > 0
+    ok = np.einsum('nd,nkd->nk', u[go], Tj) > HEADING_COS
+    ok &= ~(E[j] & (np.abs(along) > STEP_M))                             # past an element's end
+    ok &= np.abs(side) <= gate_m
+    score = np.where(ok, np.abs(side), np.inf)
+    rows = np.arange(len(go))
     best = score.argmin(1)
     hit = np.isfinite(score[rows, best])
-    return np.where(hit, I[j[rows, best]], -1), lat[rows, best]
+    match[go] = np.where(hit, I[j[rows, best]], -1)
+    lat[go] = side[rows, best]
+    return match, lat
 
 
 def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMap:
@@ -194,8 +202,9 @@ def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMa
     tracks = [(xy, t) for xy, t in tracks if len(xy) >= min_points]
     if not len(P) or not tracks:
         return out
-    xy = np.concatenate([_smoothed(x, t) for x, t in tracks])
-    u = np.concatenate([_headings(_smoothed(x, t), t) for x, t in tracks])
+    smooth = [_smoothed(x, t) for x, t in tracks]
+    xy = np.concatenate(smooth)
+    u = np.concatenate([_headings(m, t) for m, (_, t) in zip(smooth, tracks)])
     match, lat = _match_points(xy, u, cKDTree(P), T, I, E, gate_m)
     radial = xy - mapped.center
     r = np.hypot(*radial.T)
