@@ -10,7 +10,8 @@ independent of the estimator's model. A claim the traffic contradicts is dropped
 
 =====================  ==================================================================
 ``lane_moved``         the vehicles on the mapped lane drive along its center line (median
-                       lateral offset below ``moved_m / 2``)
+                       lateral offset below ``moved_m / 2``); nobody drove it and nobody
+                       drove beside the mapped lanes of its arm direction either
 ``lane_removed``       a vehicle drove the mapped lane
 ``lane_added``         no vehicle of that arm direction drove outside the mapped lanes
 ``arm_removed``        a vehicle drove one of the mapped arm's lanes
@@ -281,7 +282,11 @@ def refutes(f, traffic: TrafficOnMap, mapped, moved_m: float, arm_gate_deg: floa
     gate = math.radians(arm_gate_deg)
     if f.kind == 'lane_moved':
         lid = f.map_lanes[0]
-        return traffic.vehicles.get(lid, 0) >= 1 and abs(traffic.offset_m[lid]) < 0.5 * moved_m
+        if traffic.vehicles.get(lid, 0) >= 1:
+            return abs(traffic.offset_m[lid]) < 0.5 * moved_m
+        # nobody drove the mapped lane: only traffic beside the map there can show it moved
+        d = ENTERING if f.direction == 'in' else LEAVING
+        return _off_map(traffic, mapped.arms[f.map_arm].angle, d, gate) == 0
     if f.kind == 'lane_removed':
         return any(traffic.vehicles.get(l, 0) >= 1 for l in f.map_lanes)
     if f.kind == 'lane_added':

@@ -119,3 +119,18 @@ def test_bad_match_config_named():
         ChangeConfig(match_gate_m=0.0).validate()
     with pytest.raises(ValueError, match='corroborate'):
         ChangeConfig(corroborate=2).validate()
+
+
+def test_a_moved_lane_needs_its_vehicles_or_traffic_beside_the_map():
+    """A lane claimed moved that no vehicle drove is shown moved only by traffic outside the
+    mapped lanes of its arm direction (a lane moved farther than the matching gate)."""
+    from types import SimpleNamespace
+    from intersection_estimator.fleet.corroborate import TrafficOnMap
+    from intersection_estimator.model import ENTERING, LEAVING
+    X = SimpleNamespace(arms=[SimpleNamespace(angle=0.0), SimpleNamespace(angle=np.pi / 2)])
+    f = Finding('lane_moved', 'lane_moved:L', 0.9, map_arm=1, direction='in', map_lanes=['L'])
+    assert refutes(f, TrafficOnMap(), X, 0.75, 30.0)
+    assert not refutes(f, TrafficOnMap(off_map=[(np.pi / 2 + 0.1, ENTERING)]), X, 0.75, 30.0)
+    assert refutes(f, TrafficOnMap(off_map=[(np.pi / 2, LEAVING), (0.0, ENTERING)]), X, 0.75, 30.0)
+    assert refutes(f, TrafficOnMap(vehicles={'L': 3}, offset_m={'L': 0.1}), X, 0.75, 30.0)
+    assert not refutes(f, TrafficOnMap(vehicles={'L': 3}, offset_m={'L': -0.9}), X, 0.75, 30.0)
