@@ -63,6 +63,7 @@ HEADING_COS = 0.7      # a lane matches a point when their directions agree this
 STEP_M = 0.5           # mapped center lines are sampled this densely for the matching [m]
 #: Autoware labels of road users that keep to no lane (bicycle, pedestrian; LaneConfig.skip_labels)
 SKIP_LABELS = (6, 7)
+MIN_TRAVEL_M = 3.0      # a vehicle whose averaged positions span less never drove (floor.MIN_TRAVEL_M)
 REACH_GATE_DEG = 30.0   # a point belongs to the mapped arm this close in angle for the map's reach
 
 
@@ -169,11 +170,14 @@ def _reach(mapped, phi: np.ndarray, gate: float) -> np.ndarray:
     return np.where(diff[np.arange(len(phi)), near] <= gate, far[near], far.max())
 
 
-def _match_points(xy: np.ndarray, u: np.ndarray, tree, T, I, E, gate_m: float):
-    """Per point: the matched element (-1: none) and the signed lateral offset to it. Points
-    without a heading (standing) match nothing and are not looked up."""
+def _match_points(xy: np.ndarray, u: np.ndarray, queued: np.ndarray, tree, T, I, E, lane: np.ndarray,
+                  gate_m: float):
+    """Per point: the matched element (-1: none) and the signed lateral offset to it. A moving
+    point matches an element of its direction; a ``queued`` one (standing, of a vehicle that
+    drove) the nearest lane, whatever its direction; other points are not looked up."""
     match, lat = np.full(len(xy), -1), np.zeros(len(xy))
-    go = np.flatnonzero(np.isfinite(u[:, 0]))
+    moving = np.isfinite(u[:, 0])
+    go = np.flatnonzero(moving | queued)
     if not len(go):
         return match, lat
     k = min(8, tree.n)
@@ -182,7 +186,7 @@ def _match_points(xy: np.ndarray, u: np.ndarray, tree, T, I, E, gate_m: float):
     rel = xy[go, None, :] - tree.data[j]
     along = np.einsum('nkd,nkd->nk', rel, Tj)
     side = Tj[..., 0] * rel[..., 1] - Tj[..., 1] * rel[..., 0]           # left of the lane > 0
-    ok = np.einsum('nd,nkd->nk', u[go], Tj) > HEADING_COS
+    ok = np.where(moving[go, None], np.einsum('nd,nkd->nk', np.nan_to_num(u[go]), Tj) > HEADING_COS, lane[j])
     ok &= ~(E[j] & (np.abs(along) > STEP_M))                             # past an element's end
     ok &= np.abs(side) <= gate_m
     score = np.where(ok, np.abs(side), np.inf)
@@ -192,6 +196,13 @@ def _match_points(xy: np.ndarray, u: np.ndarray, tree, T, I, E, gate_m: float):
     match[go] = np.where(hit, I[j[rows, best]], -1)
     lat[go] = side[rows, best]
     return match, lat
+
+
+def _drove(smooth: np.ndarray) -> bool:
+    """Did the vehicle drive in the window (its averaged positions span ``MIN_TRAVEL_M``)? A
+    vehicle standing through the whole window (parked, waiting at the kerb) is no lane's
+    traffic; one that drove up to a queue and stands there is (``scenarios.floor.drove``)."""
+    return float(np.hypot(*np.ptp(smooth, axis=0))) >= MIN_TRAVEL_M
 
 
 def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMap:
@@ -206,7 +217,9 @@ def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMa
     smooth = [_smoothed(x, t) for x, t in tracks]
     xy = np.concatenate(smooth)
     u = np.concatenate([_headings(m, t) for m, (_, t) in zip(smooth, tracks)])
-    match, lat = _match_points(xy, u, cKDTree(P), T, I, E, gate_m)
+    queued = np.concatenate([np.full(len(m), _drove(m)) for m in smooth]) & ~np.isfinite(u[:, 0])
+    lane = np.array([el.direction != 0 for el in elements])[I]
+    match, lat = _match_points(xy, u, queued, cKDTree(P), T, I, E, lane, gate_m)
     radial = xy - mapped.center
     r = np.hypot(*radial.T)
     outside = (match < 0) & np.isfinite(u[:, 0]) & (r > _box_radius(mapped))

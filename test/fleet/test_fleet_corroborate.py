@@ -134,3 +134,34 @@ def test_a_moved_lane_needs_its_vehicles_or_traffic_beside_the_map():
     assert refutes(f, TrafficOnMap(off_map=[(np.pi / 2, LEAVING), (0.0, ENTERING)]), X, 0.75, 30.0)
     assert refutes(f, TrafficOnMap(vehicles={'L': 3}, offset_m={'L': 0.1}), X, 0.75, 30.0)
     assert not refutes(f, TrafficOnMap(vehicles={'L': 3}, offset_m={'L': -0.9}), X, 0.75, 30.0)
+
+
+def test_a_queued_vehicle_uses_its_lane_a_parked_one_does_not(tmp_path, cases):
+    """A vehicle that drove up to a queue and stands there is its lane's traffic (the world's
+    ground truth counts it): its standing positions match the nearest lane. One standing
+    through the whole window (parked) is not traffic."""
+    from scipy.spatial import cKDTree
+    from intersection_estimator.fleet import corroborate as co
+    sc, _ = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    a, b = X.arms[0].lanes_in[0], X.arms[1].lanes_in[0]
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 20.0, 0.1)
+    stop = np.asarray(a.center, float)[len(a.center) // 2]
+    queue = np.concatenate([stop + np.linspace(-12.0, 0.0, 40)[:, None] * (a.center[-1] - a.center[0])
+                            / np.hypot(*(a.center[-1] - a.center[0])), np.repeat(stop[None], 160, 0)])
+    parked = np.repeat(np.asarray(b.center, float)[len(b.center) // 2][None], len(t), 0)
+    q, pk = (co._smoothed(p + rng.normal(0, 0.3, p.shape), t) for p in (queue, parked))
+    assert co._drove(q) and not co._drove(pk)
+    els = co._elements(X)
+    P, T, I, E = co._samples(els)
+    lane = np.array([el.direction != 0 for el in els])[I]
+    u = co._headings(q, t)
+    standing = ~np.isfinite(u[:, 0])
+    assert standing.sum() > 100
+    with_queue, _ = co._match_points(q, u, standing, cKDTree(P), T, I, E, lane, 1.75)
+    without, _ = co._match_points(q, u, np.zeros(len(q), bool), cKDTree(P), T, I, E, lane, 1.75)
+    ids = np.array([el.id for el in els])
+    assert (ids[with_queue[standing]] == a.id).all() and (without[standing] == -1).all()
+    tr = match_traffic([(parked + rng.normal(0, 0.3, parked.shape), t)], X, 1.75, 5)
+    assert tr.vehicles == {} and tr.off_map == []
