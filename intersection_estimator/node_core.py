@@ -147,6 +147,9 @@ class EstimatorCore:
         self._subs: list = []
         self.prior = self._load_prior_map(values)
         self._change_keys: frozenset = frozenset()
+        self._changes_due = None            # (header, result) to compare with the prior map
+        self._change_t = float('-inf')      # when it was last compared (monotonic) [s]
+        self._change_ms: list = []          # recent costs of that comparison [ms]
 
     @staticmethod
     def _load_prior_map(values: dict):
@@ -260,9 +263,14 @@ class EstimatorCore:
             # (_publish_lanes_now): a lane update's estimation keeps the whole budget, a
             # tick with lanelets waiting leaves room for publishing them
             reserve = lanes if self._lanes_due is not None else 0.0
+            # the map comparison of the last lane update (prior_map) runs in a tick of its own,
+            # which estimates in what the comparison leaves of the budget
+            compare = self._compare_now()
+            reserve += max(self._change_ms, default=0.0) if compare else 0.0
             budget = self.values['budget_ms']
+            floor = 0.1 if compare else 0.5
             result = tick(self.ingest, self.estimator, wall_budget=True, log=self.get_logger().info,
-                          budget_s=max(budget - base - reserve, 0.5 * budget) / 1e3)
+                          budget_s=max(budget - base - reserve, floor * budget) / 1e3)
             if result is not None and result.topology_samples < samples:
                 self._prev_samples = 0
             if not self._stop.is_set():
@@ -292,6 +300,13 @@ class EstimatorCore:
                                                    result.log_posterior, result.observations, result.state))
             if result.lanes_updated:          # the newest lane course waits for its tick
                 self._lanes_due = (header, result)
+        change = 0.0
+        if self._compare_now():               # the newest lane update against the prior map
+            tc = time.perf_counter()
+            self._publish_map_changes(*self._changes_due)
+            self._changes_due, self._change_t = None, time.monotonic()
+            change = (time.perf_counter() - tc) * 1e3
+            self._change_ms = (self._change_ms + [change])[-5:]
         published = self._lanes_due is not None and self._publish_lanes_now(t0)
         if published:
             self._publish_lanes(*self._lanes_due)
@@ -299,9 +314,17 @@ class EstimatorCore:
         self._tick_ms.append((time.perf_counter() - t0) * 1e3)
         self._tick_ms = self._tick_ms[-100:]
         if result is not None and result.timing_ms:   # what ticks spend besides estimating:
-            over = max(self._tick_ms[-1] - result.timing_ms.get('total', 0.0), 0.0)   # messages,
+            over = max(self._tick_ms[-1] - result.timing_ms.get('total', 0.0) - change, 0.0)   # messages,
             self._overhead_ms[published].append(over)   # lanelets and markers when published
         self.pub_diag.publish(self._diagnostics(header, result))
+
+    def _compare_now(self) -> bool:
+        """Compare the waiting lane course with the prior map in this tick? When one waits and
+        ``map_changes_period`` has passed since the last comparison (~/map_changes is latched;
+        comparing costs up to ~150 ms on a large junction, so it is not done on every lane
+        update)."""
+        return self._changes_due is not None and \
+            time.monotonic() - self._change_t >= self.values['map_changes_period']
 
     def _publish_lanes_now(self, t0: float) -> bool:
         """Publish the waiting lane course in this tick? Yes when the recent worst cost of
@@ -317,8 +340,10 @@ class EstimatorCore:
         return False
 
     def _publish_lanes(self, header, result) -> None:
-        """~/lanelets, the markers, the OSM file and the map changes of ``result``
-        (latched: subscribers keep the last ones meanwhile)."""
+        """~/lanelets, the markers and the OSM file of ``result`` (latched: subscribers keep
+        the last ones meanwhile); its comparison with the prior map follows in the next tick
+        (map matching the window costs up to ~100 ms on a large junction, and the tick that
+        runs it leaves room for it)."""
         t = self.types
         self.pub_lanelets.publish(lanelets_msg(t, header, result.lanelets, result.lane_samples))
         markers, self._marker_keys = markers_msg(t, header, result.intersection, result.lanelets,
@@ -326,7 +351,8 @@ class EstimatorCore:
         self.pub_markers.publish(markers)
         self._lanes_out = True
         self._write_osm(result.lanelets)
-        self._publish_map_changes(header, result)
+        if self.prior is not None:
+            self._changes_due = (header, result)
 
     def _clear_after_reset(self, header) -> None:
         """The estimator started over: the latched lanes and markers of the previous
@@ -342,6 +368,7 @@ class EstimatorCore:
             self._marker_keys, self._lanes_out = frozenset(), False
             self._write_osm([])
             self._change_keys = frozenset()          # DELETEALL took the change markers too
+            self._changes_due = None                  # the previous intersection's comparison
             self._publish_map_changes(header, None)
 
     def _publish_map_changes(self, header, result) -> None:
@@ -388,7 +415,8 @@ class EstimatorCore:
               'tick_ms_median': float(np.median(ticks)), 'tick_ms_p95': float(np.percentile(ticks, 95)),
               'tick_ms_last': float(ticks[-1]), 'budget_ms': budget,
               'budget_use': float(np.median(ticks)) / budget,
-              **dict(zip(('overhead_ms', 'lanes_publish_ms'), self._overheads()))}
+              **dict(zip(('overhead_ms', 'lanes_publish_ms'), self._overheads())),
+              'map_changes_ms': max(self._change_ms, default=0.0)}
         if result is not None:
             drawn = result.topology_samples - self._prev_samples
             self._prev_samples = result.topology_samples

@@ -46,37 +46,13 @@ from intersection_estimator.fleet.edits import EDITS, EXPECTED, apply_edit, driv
 from intersection_estimator.fleet.fuse import fuse
 from intersection_estimator.fleet.prior_map import load_prior_map
 from intersection_estimator.pipeline import estimate
+from intersection_estimator.scenarios.sumo_gt import snap_connectors
 from intersection_estimator.sim import simulate_scenario
 
 FAST = {'timer_period': 1.0, 'topology_samples': 1500, 'lane_samples': 3000}
 CACHE: Path | None = None     # --cache: estimates kept between runs (they do not depend on the map)
 FAMILY = 'table1'             # --family
 CFG = ChangeConfig()
-
-
-def _snap_connectors(lls) -> None:
-    """SUMO's ground truth as a Lanelet2 map: SUMO's internal lanes (our connectors) start
-    and end 0.1-0.4 m from the lanes they join, so lanelet2's routing graph (shared end
-    points) would see no connection and the map no intersection. A map's lanelets share
-    their end points; move each connector's ends onto its entering / leaving lane (only
-    the virtual connector pieces change, never an entering or leaving lane)."""
-    by = {l.id: l for l in lls}
-    for l in lls:
-        if l.kind == 'connector':
-            continue
-        for sid in l.successors:                       # entering lane -> connector
-            c = by.get(sid)
-            if c is not None and c.kind == 'connector':
-                c.left[0], c.right[0] = l.left[-1], l.right[-1]
-                c.center[0] = 0.5 * (c.left[0] + c.right[0])
-    for c in lls:
-        if c.kind != 'connector':
-            continue
-        for sid in c.successors:                       # connector -> leaving lane
-            o = by.get(sid)
-            if o is not None and o.kind != 'connector':
-                c.left[-1], c.right[-1] = o.left[0], o.right[0]
-                c.center[-1] = 0.5 * (c.left[-1] + c.right[-1])
 
 
 def _scenario(seed: int):
@@ -92,7 +68,7 @@ def _scenario(seed: int):
         sc = sumo_scenario(seed)
         if f is not None:
             f.write_bytes(pickle.dumps(sc))
-    _snap_connectors(sc.gt_lanelets)
+    snap_connectors(sc.gt_lanelets)
     return sc
 
 

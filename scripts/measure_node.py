@@ -10,6 +10,7 @@ ground truth's number of arms. DDS stays on this host with its own domain id.
 
     .venv/bin/python scripts/measure_node.py bags/tracked [--rate 1.0] [--json out.json]
     .venv/bin/python scripts/measure_node.py --sumo 121      # a SUMO family case as the bag
+    .venv/bin/python scripts/measure_node.py --sumo 121 --prior-map   # ... and its map as prior_map
 
 ``--sumo SEED`` writes that case of the SUMO family (issue 15: a real junction's size, e.g.
 seed 121: 6 arms, 34 lanelets, 28.6k tracked rows over 41 s) as a tracked-objects bag with
@@ -65,19 +66,25 @@ def _listen(args, env):
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('ie_measure', context=ctx)
-    diags, topos = [], []
+    diags, topos, changes = [], [], []
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
     node.create_subscription(DiagnosticArray, '/diagnostics',
                              lambda m: diags.append((time.monotonic(), m)), 50)
     node.create_subscription(Topology, '/intersection_estimator/topology',
                              lambda m: topos.append((time.monotonic(), m)), latched)
+    if args.prior_map:          # the comparison with the map happened: its messages
+        from intersection_estimator_msgs.msg import MapChangeArray
+        node.create_subscription(MapChangeArray, '/intersection_estimator/map_changes',
+                                 lambda m: changes.append((m.intersection_id, len(m.changes))), latched)
     ex = rclpy.executors.SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     procs = []
     try:
+        extra = ['-p', f'prior_map:={args.bag}.osm'] if args.prior_map else []
         procs.append(subprocess.Popen([str(BIN / 'intersection_estimator_node'), '--ros-args',
-                                       '--params-file', str(ROOT / 'config' / 'intersection_estimator.yaml')],
+                                       '--params-file', str(ROOT / 'config' / 'intersection_estimator.yaml')]
+                                      + extra,
                                       env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         end = time.monotonic() + 30
         while not topos and time.monotonic() < end:      # bounded wait for discovery
@@ -101,7 +108,7 @@ def _listen(args, env):
                 p.wait(10)
         node.destroy_node()
         ctx.try_shutdown()
-    return diags, topos, t_play, n_arms
+    return diags, topos, t_play, n_arms, changes
 
 
 def _pct(x, q):
@@ -123,6 +130,8 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
            'overhead_ms_last': float(last.get('overhead_ms', 'nan')),
            'lanes_publish_ms_max': max((float(v.get('lanes_publish_ms', 'nan')) for _, v in vals),
                                        default=float('nan')),
+           'map_changes_ms_max': max((float(v.get('map_changes_ms', 'nan')) for _, v in vals),
+                                     default=float('nan')),
            'estimation_ms_median': _pct(est, 0.5), 'estimation_ms_p95': _pct(est, 0.95),
            'ticks_with_data': len(vals), 'true_arms': n_arms, 'right_arm_count': first is not None}
     if first is not None:
@@ -133,15 +142,20 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
 
 
 def _sumo_bag(seed: int, folder: Path) -> str:
-    """Write SUMO family case ``seed`` as a tracked bag + ``<bag>.gt.json`` in ``folder``."""
+    """Write SUMO family case ``seed`` as a tracked bag + ``<bag>.gt.json`` and its ground
+    truth as a Lanelet2 map ``<bag>.osm`` (a prior map for ``--prior-map``) in ``folder``."""
     sys.path.insert(0, str(ROOT))
     from intersection_estimator.bagio.scenario import write_scenario_bag
     from intersection_estimator.bench import BenchOptions, make_case
     from intersection_estimator.estimate_io import dumps
+    from intersection_estimator.export.osm import write_osm
+    from intersection_estimator.scenarios.sumo_gt import snap_connectors
     sc, gt = make_case(BenchOptions(n=1, seed=0, mode='tracked', family='sumo'), seed)
     bag = folder / f'sumo_{seed}'
     write_scenario_bag(sc, bag, sensors=('tracked',))
     Path(str(bag) + '.gt.json').write_text(dumps(gt))
+    snap_connectors(sc.gt_lanelets)
+    write_osm(str(bag) + '.osm', sc.gt_lanelets)
     return str(bag)
 
 
@@ -149,11 +163,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('bag', nargs='?')
     ap.add_argument('--sumo', type=int, metavar='SEED', help='measure on this SUMO family case')
+    ap.add_argument('--prior-map', action='store_true',
+                    help='with --sumo: the case\'s ground truth as the node\'s prior_map (map changes live)')
     ap.add_argument('--rate', type=float, default=1.0)
     ap.add_argument('--json')
     args = ap.parse_args(argv)
     if (args.bag is None) == (args.sumo is None):
         ap.error('give a bag or --sumo SEED')
+    if args.prior_map and args.sumo is None:
+        ap.error('--prior-map needs --sumo SEED (the case\'s ground truth is the map)')
     if args.sumo is not None:
         tmp = tempfile.TemporaryDirectory(prefix='ie_measure_sumo_')
         args.bag = _sumo_bag(args.sumo, Path(tmp.name))
@@ -161,8 +179,13 @@ def main(argv=None) -> int:
         print(f'measure_node: no such bag: {args.bag}', file=sys.stderr)
         return 1
     env = ros_env()
-    diags, topos, t_play, n_arms = _listen(args, env)
-    emit(_summary(diags, topos, t_play, n_arms, args.rate), args.json)
+    diags, topos, t_play, n_arms, changes = _listen(args, env)
+    out = _summary(diags, topos, t_play, n_arms, args.rate)
+    if args.prior_map:
+        matched = [n for i, n in changes if i]
+        out.update(map_change_messages=len(changes), map_change_messages_matched=len(matched),
+                   map_changes_last=matched[-1] if matched else None)
+    emit(out, args.json)
     return 0
 
 

@@ -126,8 +126,9 @@ def test_bad_geo_origin_is_refused_naming_it(make_node):
 
 
 def test_prior_map_publishes_map_changes_and_their_markers(make_node, tmp_path):
-    """prior_map set: each lane update compares the estimate with the map (~/map_changes,
-    markers in namespace map_changes); a reset publishes an empty report."""
+    """prior_map set: the newest lane update is compared with the map in the tick after it, at
+    most every map_changes_period (~/map_changes, markers in namespace map_changes); a reset
+    publishes an empty report."""
     from intersection_estimator.export.osm import write_osm
     from intersection_estimator.fleet.edits import apply_edit
     from intersection_estimator.sim import simulate_scenario
@@ -135,9 +136,22 @@ def test_prior_map_publishes_map_changes_and_their_markers(make_node, tmp_path):
     sc = simulate_scenario(1)          # its ground truth as the estimate, the map with one lane moved
     res = EstimateResult(sc.gt, sc.gt_lanelets, {'total': 1.0}, 100, 10, -5.0, 'CONVERGED', 500, True)
     moved, _ = apply_edit(sc, 'lane_moved', np.random.default_rng(1))
-    node = make_node(prior_map=str(write_osm(tmp_path / 'prior.osm', moved)))
+    node = make_node(prior_map=str(write_osm(tmp_path / 'prior.osm', moved)), map_changes_period=600.0)
     node._publish(res, time.perf_counter(), T_DATA)
+    # the lanelets go out at once, their comparison with the map in the next tick
+    assert node.sent['lanelets'] and 'map_changes' not in node.sent
+    assert node._changes_due is not None and node._compare_now()
+    node._publish(None, time.perf_counter(), T_DATA + 0.2)
     (msg,) = node.sent['map_changes']
+    assert node._changes_due is None and len(node._change_ms) == 1
+    # the next lane update waits for map_changes_period; the newest one is compared then
+    node._publish(res, time.perf_counter(), T_DATA + 0.4)
+    node._publish(None, time.perf_counter(), T_DATA + 0.6)
+    assert len(node.sent['map_changes']) == 1 and not node._compare_now()
+    node._change_t -= 600.0
+    node._publish(None, time.perf_counter(), T_DATA + 0.8)
+    s = node.sent['map_changes'][-1].header.stamp
+    assert len(node.sent['map_changes']) == 2 and s.sec + 1e-9 * s.nanosec == pytest.approx(T_DATA + 0.4)
     assert msg.intersection_id and msg.header.stamp.sec == int(T_DATA)
     assert [c.kind for c in msg.changes] == ['lane_moved'], [c.kind for c in msg.changes]
     assert any(m.ns == NAMESPACE for arr in node.sent['markers'] for m in arr.markers)

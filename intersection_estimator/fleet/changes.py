@@ -56,7 +56,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.special import hyp2f1
 
-from ..evaluate import lane_distance
+from ..evaluate import _cost_matrix, lane_distance, resample
 from ..model import ENTERING, LEAVING
 from ..ranges import check_table
 from .corroborate import refutes
@@ -284,11 +284,20 @@ def _arm_findings(est, mapped, amap, conf, pas, cfg) -> list:
     return out
 
 
+def _distances(est_l, map_l) -> np.ndarray:
+    """``(len(est_l), len(map_l))`` :func:`lane_distance` of every estimated lane to every
+    mapped lane, in one pass per mapped lane (the node compares at every lane update)."""
+    if not est_l or not map_l:
+        return np.zeros((len(est_l), len(map_l)))
+    return _cost_matrix([resample(np.asarray(e.center, float)) for e in est_l],
+                        [np.asarray(m.center, float) for m in map_l]).T
+
+
 def _pair_lanes(est_l, map_l) -> dict[int, int]:
     """Estimated lane -> mapped lane by center-line distance (Hungarian)."""
     if not est_l or not map_l:
         return {}
-    cost = np.array([[lane_distance(e.center, m.center) for m in map_l] for e in est_l])
+    cost = _distances(est_l, map_l)
     cost[~np.isfinite(cost)] = 1e6
     r, c = linear_sum_assignment(cost)
     return {int(i): int(j) for i, j in zip(r, c)}
@@ -313,7 +322,7 @@ def _lane_identity(e, m, est_lanes, mapped) -> dict:
         el = est_lanes.get((e, d), [])
         if not el or not ml:
             continue
-        cost = np.array([[lane_distance(x.center, y.center) for _, _, y in ml] for x in el])
+        cost = _distances(el, [y for _, _, y in ml])
         cost[~np.isfinite(cost)] = np.inf
         for i, x in enumerate(el):
             if not np.isfinite(cost[i]).any():

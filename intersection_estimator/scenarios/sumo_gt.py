@@ -22,7 +22,7 @@ import numpy as np
 from ..components import components
 from .lanegraph import LaneGraphGT, Segment, gt_from_lane_graph
 
-__all__ = ['read_net', 'net_segments', 'junction_of', 'main_junction', 'net_gt', 'CLUSTER_M']
+__all__ = ['read_net', 'net_segments', 'junction_of', 'main_junction', 'net_gt', 'CLUSTER_M', 'snap_connectors']
 
 CLUSTER_M = 25.0
 
@@ -113,3 +113,28 @@ def net_gt(path_or_net, junction: str | None = None, *, arm_length: float = 60.0
     junction = main_junction(box_of) if junction is None else _clusters(net).get(junction, junction)
     box = [k for k, j in box_of.items() if j == junction]
     return gt_from_lane_graph(segs, box, arm_length=arm_length), segs, junction
+
+
+def snap_connectors(lls) -> None:
+    """SUMO's ground truth as a Lanelet2 map: SUMO's internal lanes (our connectors) start
+    and end 0.1-0.4 m from the lanes they join, so lanelet2's routing graph (shared end
+    points) would see no connection and the map no intersection. A map's lanelets share
+    their end points; move each connector's ends onto its entering / leaving lane (only
+    the virtual connector pieces change, never an entering or leaving lane)."""
+    by = {l.id: l for l in lls}
+    for l in lls:
+        if l.kind == 'connector':
+            continue
+        for sid in l.successors:                       # entering lane -> connector
+            c = by.get(sid)
+            if c is not None and c.kind == 'connector':
+                c.left[0], c.right[0] = l.left[-1], l.right[-1]
+                c.center[0] = 0.5 * (c.left[0] + c.right[0])
+    for c in lls:
+        if c.kind != 'connector':
+            continue
+        for sid in c.successors:                       # connector -> leaving lane
+            o = by.get(sid)
+            if o is not None and o.kind != 'connector':
+                c.left[-1], c.right[-1] = o.left[0], o.right[0]
+                c.center[-1] = 0.5 * (c.left[-1] + c.right[-1])
