@@ -274,7 +274,7 @@ class EstimatorCore:
             if result is not None and result.topology_samples < samples:
                 self._prev_samples = 0
             if not self._stop.is_set():
-                self._publish(result, t0, stamp)
+                self._publish(result, t0, stamp, compare)
         except Exception as exc:  # noqa: BLE001 - keep estimating on the next tick
             if self._stop.is_set():
                 return        # shutting down: the publishers may be gone, nothing to report
@@ -288,7 +288,9 @@ class EstimatorCore:
             header.stamp = make_time(self.types, stamp)
         return header
 
-    def _publish(self, result, t0: float, stamp: float | None) -> None:
+    def _publish(self, result, t0: float, stamp: float | None, compare: bool | None = None) -> None:
+        """This tick's outputs; ``compare``: the tick's decision to compare the waiting lane
+        course with the prior map (taken before it estimated, :meth:`_compare_now` if None)."""
         header = self._header(stamp)
         t = self.types
         self._clear_after_reset(header)
@@ -301,7 +303,8 @@ class EstimatorCore:
             if result.lanes_updated:          # the newest lane course waits for its tick
                 self._lanes_due = (header, result)
         change = 0.0
-        if self._compare_now():               # the newest lane update against the prior map
+        compare = self._compare_now() if compare is None else compare
+        if compare and self._changes_due is not None:     # the newest lane update against the map
             tc = time.perf_counter()
             self._publish_map_changes(*self._changes_due)
             self._changes_due, self._change_t = None, time.monotonic()

@@ -483,6 +483,7 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, **kw) ->
     return _absence('lane_removed', f'lane_removed:{lane_id}', passages, share, cfg, llr=llr,
                     map_lanes=[lane_id], **kw)
 
+
 def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_ok, used, ident) -> list:
     """Turns in *mapped* lane indices: an estimated connector's entering and leaving lanes are
     the mapped lanes they lie on (``ident``, :func:`_lane_identity`); a turn from or to an
@@ -538,9 +539,9 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     lanes, by_id = _est_lanes(lanelets)
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
     ident = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
-    moves = _movements(by_id, amap)
-    p_dirs = None
-    if traffic is not None:       # the turns and passages the vehicles showed on the map itself
+    if traffic is None:           # the turns the estimate's connectors show
+        moves, p_dirs = _movements(by_id, amap), None
+    else:                         # the turns and passages the vehicles showed on the map itself
         moves = {(e, d): traffic.moves.get((m, d), {}) for e, m in amap.items() for d in (ENTERING, LEAVING)}
         p_dirs = {(e, d): float(traffic.passages.get((m, d), 0)) for e, m in amap.items()
                   for d in (ENTERING, LEAVING)}

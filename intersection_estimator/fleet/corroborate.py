@@ -51,6 +51,9 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..evaluate import resample
+from ..lanes.config import LaneConfig
+from ..lanes.init import track_rows
 from ..model import ENTERING, LEAVING
 
 __all__ = ['TrafficOnMap', 'match_traffic', 'refutes', 'tracks_of', 'drive_traffic', 'HEADING_S', 'HEADING_COS',
@@ -61,8 +64,8 @@ SMOOTH_S = 1.0         # ... of its positions averaged over this time [s]
 MIN_SPEED = 2.0        # slower points have no reliable heading and are not matched [m/s]
 HEADING_COS = 0.7      # a lane matches a point when their directions agree this well
 STEP_M = 0.5           # mapped center lines are sampled this densely for the matching [m]
-#: Autoware labels of road users that keep to no lane (bicycle, pedestrian; LaneConfig.skip_labels)
-SKIP_LABELS = (6, 7)
+#: Autoware labels of road users that keep to no lane (bicycle, pedestrian): the lane course's
+SKIP_LABELS = LaneConfig().skip_labels
 MIN_TRAVEL_M = 3.0      # a vehicle whose averaged positions span less never drove (floor.MIN_TRAVEL_M)
 REACH_GATE_DEG = 30.0   # a point belongs to the mapped arm this close in angle for the map's reach
 
@@ -102,13 +105,9 @@ def _samples(elements):
     is-an-end flags."""
     pts, tan, idx, end = [], [], [], []
     for i, el in enumerate(elements):
-        c = el.center
-        seg = np.hypot(*np.diff(c, axis=0).T)
-        s = np.concatenate([[0.0], np.cumsum(seg)])
-        if len(c) < 2 or s[-1] <= 0:
+        p = resample(el.center, STEP_M) if len(el.center) >= 2 else el.center[:1]
+        if len(p) < 2:                    # a single point or a zero-length line
             continue
-        q = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / STEP_M)) + 1))
-        p = np.stack([np.interp(q, s, c[:, 0]), np.interp(q, s, c[:, 1])], axis=1)
         t = np.gradient(p, axis=0)
         t /= np.maximum(np.hypot(*t.T), 1e-9)[:, None]
         pts.append(p)
@@ -225,18 +224,20 @@ def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMa
     outside = (match < 0) & np.isfinite(u[:, 0]) & (r > _box_radius(mapped))
     outside &= r < _reach(mapped, np.arctan2(radial[:, 1], radial[:, 0]), math.radians(REACH_GATE_DEG))
     arm_of = {el.id: el.arm for el in elements if el.direction}
+    offsets: dict = {}                    # mapped lane id -> its vehicles' matched offsets
     cuts = np.cumsum([len(x) for x, _ in tracks])[:-1]
     for m, off, o, rad, rr, uu in zip(*(np.split(v, cuts) for v in (match, lat, outside, radial, r, u))):
-        _count(out, elements, m, off, min_points, arm_of)
+        _count(out, elements, m, off, min_points, arm_of, offsets)
         if o.sum() >= min_points:
             phi = math.atan2(*np.sum(rad[o] / rr[o, None], axis=0)[::-1])
             away = float(np.sum(uu[o] * rad[o] / rr[o, None])) > 0
             out.off_map.append((phi, LEAVING if away else ENTERING))
-    return _finish(out)
+    out.offset_m = {k: float(np.median(np.concatenate(v))) for k, v in offsets.items()}
+    return out
 
 
 def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_points: int,
-           arm_of: dict) -> None:
+           arm_of: dict, offsets: dict) -> None:
     """One vehicle's matched elements: every lane ``min_points`` of its positions matched (a
     turn pocket's vehicle drives the through lane first) with their offsets; its passage of
     each arm direction and its turn from the lane most of its positions matched there (its
@@ -255,7 +256,7 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
         if elements[i].direction and c >= min_points:
             lid = elements[i].id
             out.vehicles[lid] = out.vehicles.get(lid, 0) + 1
-            out.offset_m.setdefault(lid, []).append(off[match == i])
+            offsets.setdefault(lid, []).append(off[match == i])
     cons = [i for (_, d), i in top.items() if not d]
     ins = [i for (_, d), i in top.items() if d == ENTERING]
     outs = [i for (_, d), i in top.items() if d == LEAVING]
@@ -278,13 +279,6 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
             per[other] = per.get(other, 0) + 1
 
 
-def _finish(out: TrafficOnMap) -> TrafficOnMap:
-    """Median offsets from the per-vehicle point lists."""
-    out.offset_m = {k: float(np.median(np.concatenate(v))) if isinstance(v, list) else v
-                    for k, v in out.offset_m.items()}
-    return out
-
-
 def _off_map(traffic: TrafficOnMap, angle: float, direction, gate: float) -> int:
     return sum(1 for phi, d in traffic.off_map
                if abs(math.remainder(phi - angle, 2 * math.pi)) <= gate and (direction is None or d == direction))
@@ -293,19 +287,15 @@ def _off_map(traffic: TrafficOnMap, angle: float, direction, gate: float) -> int
 def refutes(f, traffic: TrafficOnMap, mapped, moved_m: float, arm_gate_deg: float) -> bool:
     """Does the drive's traffic on the map contradict finding ``f`` (module table)?"""
     gate = math.radians(arm_gate_deg)
-    if f.kind == 'lane_moved':
-        lid = f.map_lanes[0]
-        if traffic.vehicles.get(lid, 0) >= 1:
+    if f.kind in ('lane_moved', 'lane_added'):
+        lid = f.map_lanes[0] if f.kind == 'lane_moved' else None
+        if lid is not None and traffic.vehicles.get(lid, 0) >= 1:
             return abs(traffic.offset_m[lid]) < 0.5 * moved_m
-        # nobody drove the mapped lane: only traffic beside the map there can show it moved
+        # nobody drove the mapped lane (or it is a lane the map lacks): only traffic beside
+        # the mapped lanes of that arm direction can show it
         d = ENTERING if f.direction == 'in' else LEAVING
         return _off_map(traffic, mapped.arms[f.map_arm].angle, d, gate) == 0
-    if f.kind == 'lane_removed':
-        return any(traffic.vehicles.get(l, 0) >= 1 for l in f.map_lanes)
-    if f.kind == 'lane_added':
-        d = ENTERING if f.direction == 'in' else LEAVING
-        return _off_map(traffic, mapped.arms[f.map_arm].angle, d, gate) == 0
-    if f.kind == 'arm_removed':
+    if f.kind in ('lane_removed', 'arm_removed'):
         return any(traffic.vehicles.get(l, 0) >= 1 for l in f.map_lanes)
     if f.kind == 'arm_added':
         return _off_map(traffic, math.radians(f.evidence['angle_deg']), None, gate) == 0
@@ -322,17 +312,7 @@ def tracks_of(dets, skip_labels=SKIP_LABELS) -> list:
     road users that do not drive lanes (``skip_labels``: cyclists ride beside the kerb lane,
     pedestrians walk along it -- they would "drive" a mapped lane beyond it); ``[]`` when the
     window has no identities (raw radar): then nothing can be corroborated."""
-    if dets is None or len(dets) == 0:
-        return []
-    ok = (dets.track_id >= 0) & np.isfinite(dets.xy).all(axis=1) & np.isfinite(dets.t)
-    ok &= ~np.isin(dets.label, np.asarray(skip_labels, np.int64))
-    if not ok.any():
-        return []
-    tid, xy, t = dets.track_id[ok], dets.xy[ok], dets.t[ok]
-    order = np.lexsort((t, tid))
-    tid, xy, t = tid[order], xy[order], t[order]
-    cuts = np.flatnonzero(np.diff(tid)) + 1
-    return [(x, y) for x, y in zip(np.split(xy, cuts), np.split(t, cuts))]
+    return [(xy, t) for _, xy, t in track_rows(dets, skip_labels)]
 
 
 def drive_traffic(window, mapped, cfg) -> TrafficOnMap | None:

@@ -47,10 +47,10 @@ class Trajectory:
     lane_out: tuple | None = None    # (arm, k) of the leaving part
 
 
-def trajectories(dets: Detections | None, skip_labels=()) -> list[Trajectory]:
-    """Rows with ``track_id >= 0`` grouped per id and sorted by ``t``; id -1 ignored, and
-    rows whose classification label is in ``skip_labels`` (beyond the paper: road users
-    that do not keep to a lane center, ``LaneConfig.skip_labels``)."""
+def track_rows(dets: Detections | None, skip_labels=()) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """``(track id, xy, t)`` per track of the rows with ``track_id >= 0``, sorted by ``t``;
+    id -1 ignored, and rows whose classification label is in ``skip_labels`` (beyond the
+    paper: road users that do not keep to a lane center, ``LaneConfig.skip_labels``)."""
     if dets is None or len(dets) == 0:
         return []
     ok = (dets.track_id >= 0) & np.isfinite(dets.xy).all(axis=1) & np.isfinite(dets.t)
@@ -60,9 +60,14 @@ def trajectories(dets: Detections | None, skip_labels=()) -> list[Trajectory]:
         return []
     ids, xy, t = dets.track_id[ok], dets.xy[ok], dets.t[ok]
     order = np.lexsort((t, ids))
-    ids, xy = ids[order], xy[order]
+    ids, xy, t = ids[order], xy[order], t[order]
     cuts = np.flatnonzero(np.diff(ids)) + 1
-    return [Trajectory(int(i[0]), p) for i, p in zip(np.split(ids, cuts), np.split(xy, cuts))]
+    return [(int(i[0]), p, q) for i, p, q in zip(np.split(ids, cuts), np.split(xy, cuts), np.split(t, cuts))]
+
+
+def trajectories(dets: Detections | None, skip_labels=()) -> list[Trajectory]:
+    """:func:`track_rows` as :class:`Trajectory` objects (positions in time order)."""
+    return [Trajectory(i, xy) for i, xy, _ in track_rows(dets, skip_labels)]
 
 
 def split_at_center(xy: np.ndarray, center: np.ndarray) -> int:
