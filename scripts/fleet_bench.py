@@ -60,6 +60,12 @@ def _scenario(seed: int):
     import pickle
     if FAMILY == 'table1':
         return simulate_scenario(seed)
+    if FAMILY == 'av2':              # the real recordings: case = scenario index (0..2)
+        from intersection_estimator.realdata.av2 import find_scenarios, load_av2
+        from intersection_estimator.scenarios.sumo_net import realdata_dir
+        sc = load_av2(find_scenarios(realdata_dir() / 'av2')[seed])
+        snap_connectors(sc.gt_lanelets)
+        return sc
     from intersection_estimator.scenarios.sumo import sumo_scenario
     f = None if CACHE is None else CACHE / f'sumo_scenario_{seed}.pkl'
     if f is not None and f.exists():
@@ -291,7 +297,8 @@ def _md(rows: list[dict], cols: list[str]) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument('--family', choices=('table1', 'sumo'), default='table1', help='scenario family')
+    ap.add_argument('--family', choices=('table1', 'sumo', 'av2'), default='table1',
+                    help='scenario family (av2: the three real scenarios, --seed 0 --n 3)')
     ap.add_argument('--n', type=int, default=50, help='cases per change kind (0 = skip the kinds table)')
     ap.add_argument('--seed', type=int, default=0, help='first case seed of the kinds table')
     ap.add_argument('--fusion-n', type=int, default=10, help='cases for the fusion table (10 drives each; 0 = skip)')
