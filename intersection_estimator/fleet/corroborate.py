@@ -68,6 +68,7 @@ STEP_M = 0.5           # mapped center lines are sampled this densely for the ma
 SKIP_LABELS = LaneConfig().skip_labels
 MIN_TRAVEL_M = 3.0      # a vehicle whose averaged positions span less never drove (floor.MIN_TRAVEL_M)
 REACH_GATE_DEG = 30.0   # a point belongs to the mapped arm this close in angle for the map's reach
+TOUCH_POINTS = 1         # positions on a mapped arm's lanes that show a vehicle drove the arm (refutes its removal)
 
 
 @dataclass
@@ -75,6 +76,7 @@ class TrafficOnMap:
     """What one drive's vehicles did on one mapped intersection."""
 
     vehicles: dict = field(default_factory=dict)    # mapped lane id -> vehicles that drove it
+    touched: dict = field(default_factory=dict)     # mapped lane id -> vehicles with >= TOUCH_POINTS on it
     offset_m: dict = field(default_factory=dict)    # mapped lane id -> median lateral offset (left +)
     turns: set = field(default_factory=set)         # (mapped entering lane id, leaving lane id) driven
     off_map: list = field(default_factory=list)     # (angle [rad] about the center, direction) per vehicle
@@ -101,9 +103,8 @@ def _elements(mapped) -> list:
 
 
 def _samples(elements):
-    """Dense samples of the elements' center lines: points, unit tangents, element index,
-    is-an-end flags."""
-    pts, tan, idx, end = [], [], [], []
+    """Dense samples of the elements' center lines: points, unit tangents, element index."""
+    pts, tan, idx = [], [], []
     for i, el in enumerate(elements):
         p = resample(el.center, STEP_M) if len(el.center) >= 2 else el.center[:1]
         if len(p) < 2:                    # a single point or a zero-length line
@@ -113,12 +114,9 @@ def _samples(elements):
         pts.append(p)
         tan.append(t)
         idx.append(np.full(len(p), i))
-        e = np.zeros(len(p), bool)
-        e[[0, -1]] = True
-        end.append(e)
     if not pts:
-        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, bool)
-    return np.concatenate(pts), np.concatenate(tan), np.concatenate(idx), np.concatenate(end)
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, int)
+    return np.concatenate(pts), np.concatenate(tan), np.concatenate(idx)
 
 
 def _window(t: np.ndarray, half: float):
@@ -169,7 +167,7 @@ def _reach(mapped, phi: np.ndarray, gate: float) -> np.ndarray:
     return np.where(diff[np.arange(len(phi)), near] <= gate, far[near], far.max())
 
 
-def _match_points(xy: np.ndarray, u: np.ndarray, queued: np.ndarray, tree, T, I, E, lane: np.ndarray,
+def _match_points(xy: np.ndarray, u: np.ndarray, queued: np.ndarray, tree, T, I, lane: np.ndarray,
                   gate_m: float):
     """Per point: the matched element (-1: none) and the signed lateral offset to it. A moving
     point matches an element of its direction; a ``queued`` one (standing, of a vehicle that
@@ -186,7 +184,10 @@ def _match_points(xy: np.ndarray, u: np.ndarray, queued: np.ndarray, tree, T, I,
     along = np.einsum('nkd,nkd->nk', rel, Tj)
     side = Tj[..., 0] * rel[..., 1] - Tj[..., 1] * rel[..., 0]           # left of the lane > 0
     ok = np.where(moving[go, None], np.einsum('nd,nkd->nk', np.nan_to_num(u[go]), Tj) > HEADING_COS, lane[j])
-    ok &= ~(E[j] & (np.abs(along) > STEP_M))                             # past an element's end
+    # a sample stands for the STEP_M of line around it: a point whose foot lies further along
+    # is another sample's (or beyond the element's end: a queue past a mapped lane's far end
+    # is on no mapped lane, however well it lines up with it)
+    ok &= np.abs(along) <= STEP_M
     ok &= np.abs(side) <= gate_m
     score = np.where(ok, np.abs(side), np.inf)
     rows = np.arange(len(go))
@@ -209,7 +210,7 @@ def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMa
     the lanes and connectors of ``mapped`` (module doc)."""
     out = TrafficOnMap()
     elements = _elements(mapped)
-    P, T, I, E = _samples(elements)
+    P, T, I = _samples(elements)
     tracks = [(xy, t) for xy, t in tracks if len(xy) >= min_points]
     if not len(P) or not tracks:
         return out
@@ -218,7 +219,7 @@ def match_traffic(tracks, mapped, gate_m: float, min_points: int) -> TrafficOnMa
     u = np.concatenate([_headings(m, t) for m, (_, t) in zip(smooth, tracks)])
     queued = np.concatenate([np.full(len(m), _drove(m)) for m in smooth]) & ~np.isfinite(u[:, 0])
     lane = np.array([el.direction != 0 for el in elements])[I]
-    match, lat = _match_points(xy, u, queued, cKDTree(P), T, I, E, lane, gate_m)
+    match, lat = _match_points(xy, u, queued, cKDTree(P), T, I, lane, gate_m)
     radial = xy - mapped.center
     r = np.hypot(*radial.T)
     outside = (match < 0) & np.isfinite(u[:, 0]) & (r > _box_radius(mapped))
@@ -253,6 +254,8 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
         if d:
             out.passages[(arm, d)] = out.passages.get((arm, d), 0) + 1
     for i, c in n.items():
+        if elements[i].direction and c >= min(TOUCH_POINTS, min_points):
+            out.touched[elements[i].id] = out.touched.get(elements[i].id, 0) + 1
         if elements[i].direction and c >= min_points:
             lid = elements[i].id
             out.vehicles[lid] = out.vehicles.get(lid, 0) + 1
@@ -295,8 +298,12 @@ def refutes(f, traffic: TrafficOnMap, mapped, moved_m: float, arm_gate_deg: floa
         # the mapped lanes of that arm direction can show it
         d = ENTERING if f.direction == 'in' else LEAVING
         return _off_map(traffic, mapped.arms[f.map_arm].angle, d, gate) == 0
-    if f.kind in ('lane_removed', 'arm_removed'):
+    if f.kind == 'lane_removed':
         return any(traffic.vehicles.get(l, 0) >= 1 for l in f.map_lanes)
+    if f.kind == 'arm_removed':
+        # a short arm (a neighbouring junction 17 m on, the end of a clip) gives its vehicles
+        # fewer than ``min_points`` positions on its lanes: any vehicle seen on them counts
+        return any(traffic.touched.get(l, 0) >= 1 for l in f.map_lanes)
     if f.kind == 'arm_added':
         return _off_map(traffic, math.radians(f.evidence['angle_deg']), None, gate) == 0
     if f.kind == 'connector_added':

@@ -154,14 +154,22 @@ def test_a_queued_vehicle_uses_its_lane_a_parked_one_does_not(tmp_path, cases):
     q, pk = (co._smoothed(p + rng.normal(0, 0.3, p.shape), t) for p in (queue, parked))
     assert co._drove(q) and not co._drove(pk)
     els = co._elements(X)
-    P, T, I, E = co._samples(els)
+    P, T, I = co._samples(els)
     lane = np.array([el.direction != 0 for el in els])[I]
     u = co._headings(q, t)
     standing = ~np.isfinite(u[:, 0])
     assert standing.sum() > 100
-    with_queue, _ = co._match_points(q, u, standing, cKDTree(P), T, I, E, lane, 1.75)
-    without, _ = co._match_points(q, u, np.zeros(len(q), bool), cKDTree(P), T, I, E, lane, 1.75)
+    with_queue, _ = co._match_points(q, u, standing, cKDTree(P), T, I, lane, 1.75)
+    without, _ = co._match_points(q, u, np.zeros(len(q), bool), cKDTree(P), T, I, lane, 1.75)
     ids = np.array([el.id for el in els])
     assert (ids[with_queue[standing]] == a.id).all() and (without[standing] == -1).all()
     tr = match_traffic([(parked + rng.normal(0, 0.3, parked.shape), t)], X, 1.75, 5)
     assert tr.vehicles == {} and tr.off_map == []
+    # a queue past the mapped lane's far end, in line with it, is on no mapped lane (SUMO:
+    # queues reach beyond the 60 m the map draws of an approach)
+    c = np.asarray(a.center, float)
+    out = (c[0] - c[1]) / np.hypot(*(c[0] - c[1]))
+    beyond = c[0] + np.linspace(3.0, 12.0, 50)[:, None] * out
+    m, _ = co._match_points(beyond, np.full_like(beyond, np.nan), np.ones(len(beyond), bool), cKDTree(P), T, I,
+                            lane, 1.75)
+    assert (m == -1).all()
