@@ -7,7 +7,10 @@ kinds   per map edit (arm removed, lane added, lane removed, lane moved 1 m, con
         the edited element; false = share of cases with any other change claimed;
         ``observable``: the cases whose edited element carried traffic in the world (a lane
         no vehicle drove cannot be shown added or moved; the SUMO family has many), recall
-        over those as ``recall_observable``.
+        over those as ``recall_observable``. Beside them one *world* edit, ``arm_closed``
+        (``edits.world_without_arm``): the vehicles of one arm taken out of the world and
+        the case estimated anew, against the unchanged map; the change to find is
+        ``arm_removed`` (no map edit of the issue asks for it).
 fusion  --fusion-n cases (seeds --fusion-seed..), 10 short drives each (a --share of the vehicles, own noise):
         recall / false-change rate of the fused result from the first 1, 3 and 10 drives,
         edits cycling through the kinds; false changes also against the unchanged map
@@ -42,7 +45,7 @@ import numpy as np
 from intersection_estimator.export.osm import write_osm
 from intersection_estimator.fleet.changes import ChangeConfig, compare
 from intersection_estimator.fleet.corroborate import match_traffic, tracks_of
-from intersection_estimator.fleet.edits import EDITS, EXPECTED, apply_edit, drive_variant
+from intersection_estimator.fleet.edits import EDITS, EXPECTED, WORLD_EDITS, apply_edit, drive_variant, world_without_arm
 from intersection_estimator.fleet.fuse import fuse
 from intersection_estimator.fleet.prior_map import load_prior_map
 from intersection_estimator.pipeline import estimate
@@ -162,7 +165,7 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
     r = _estimate(sc, seed)
     if r.intersection is None:
         return [{'seed': seed, 'edit': e, 'applicable': True, 'observable': True, 'hit': False, 'false': False,
-                 'false_incl_unused': False, 'claimed': []} for e in ('none',) + EDITS]
+                 'false_incl_unused': False, 'claimed': []} for e in ('none',) + EDITS + tuple(WORLD_EDITS)]
     rows = []
     maps = _maps(seed, sc, tmp)
     tracks = tracks_of(sc.detections('tracked')) if CFG.corroborate else []
@@ -182,16 +185,46 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
                      'what': what, 'hit': bool(hits),
                      'false': any(f.kind != 'connector_unused' for f in others),
                      'false_incl_unused': bool(others), 'claimed': [f.key for f in fs]})
+    rows.append(_closed_arm_row(seed, sc, maps['none'][1]))
     return rows
+
+
+def _mapped_arm_of(sc, arm: int, X) -> int:
+    """The mapped arm whose lanes lie on the ground truth's arm ``arm`` (median distance)."""
+    from scipy.spatial import cKDTree
+    from intersection_estimator.evaluate import resample
+    tree = cKDTree(np.concatenate([resample(np.asarray(l.center, float), 0.25) for l in sc.gt_lanelets
+                                   if l.arm == arm and l.kind in ('entering', 'leaving')]))
+    return int(np.argmin([np.median(tree.query(np.concatenate([resample(np.asarray(l.center, float))
+                                                               for l in a.lanes_in + a.lanes_out]))[0])
+                          for a in X.arms]))
+
+
+def _closed_arm_row(seed: int, sc, X) -> dict:
+    """World edit ``arm_closed`` (``WORLD_EDITS``): the vehicles of one arm gone, the map the
+    unchanged ground truth, estimated anew; hit = ``arm_removed`` of the mapped arm on it."""
+    world, what = world_without_arm(sc, np.random.default_rng(seed))
+    if world is None:
+        return {'seed': seed, 'edit': 'arm_closed', 'applicable': False}
+    r = _estimate(world, seed)
+    m = _mapped_arm_of(sc, what['arm'], X)
+    fs = [] if r.intersection is None else compare(
+        r.intersection, r.lanelets, X, CFG,
+        _traffic(tracks_of(world.detections('tracked')) if CFG.corroborate else [], X)).findings
+    hits = [f for f in fs if f.kind == 'arm_removed' and f.map_arm == m]
+    others = [f for f in fs if f not in hits[:1]]
+    return {'seed': seed, 'edit': 'arm_closed', 'applicable': True, 'observable': True, 'what': what,
+            'hit': bool(hits), 'false': any(f.kind != 'connector_unused' for f in others),
+            'false_incl_unused': bool(others), 'claimed': [f.key for f in fs]}
 
 
 def _kind_table(rows: list[dict]) -> list[dict]:
     out = []
-    for edit in ('none',) + EDITS:
+    for edit in ('none',) + EDITS + tuple(WORLD_EDITS):
         rs = [r for r in rows if r['edit'] == edit and r['applicable']]
         n = len(rs)
         obs = [r for r in rs if r['observable']]
-        out.append({'edit': edit, 'expected': EXPECTED.get(edit, '(no change)'), 'cases': n,
+        out.append({'edit': edit, 'expected': {**EXPECTED, **WORLD_EDITS}.get(edit, '(no change)'), 'cases': n,
                     'not_applicable': sum(1 for r in rows if r['edit'] == edit and not r['applicable']),
                     'recall': sum(r['hit'] for r in rs) / max(n, 1),
                     'observable': len(obs), 'recall_observable': sum(r['hit'] for r in obs) / max(len(obs), 1),

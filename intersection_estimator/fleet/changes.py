@@ -4,9 +4,10 @@ Change kinds say how the *world* differs from the map:
 
 ========================  =====================================================================
 ``arm_added``             an estimated arm no mapped arm matches (by angle, :mod:`.match`)
-``arm_removed``           a mapped arm no estimated arm matches although enough passages crossed
-                          the intersection to show it (absence, below); else the arm is only
-                          *unobserved* and nothing is claimed
+``arm_removed``           a mapped arm no estimated arm matches although enough vehicles were
+                          seen turning between the other arms to show it (absence, below,
+                          :func:`_arm_absence`); else the arm is only *unobserved* and nothing
+                          is claimed
 ``lane_added/_removed``   a matched arm has more / fewer lanes in one direction than mapped
                           (removed: an absence, below)
 ``lane_moved``            same lane count, but a lane's estimated center line lies more than
@@ -39,6 +40,9 @@ With ``share_concentration`` k > 0 the share itself varies between elements
 A missing lane is one finding per mapped lane (key = its id); a drive whose vehicles drove
 that lane refutes it (``DriveView.lanes_seen``), and a drive that matched a mapped arm
 refutes its removal, whatever the arm's confidence (:meth:`DriveView.contradiction`).
+With ``turn_absence`` the passages are the vehicles that could have used the element: for a
+lane those of the turns the map gives it (:func:`_lane_absence`), for an arm those seen
+turning between the other arms (:func:`_arm_absence`).
 A mapped connector is only judged when the drive's vehicles left its entering lane through
 another connector to a matched arm; its passages are the turns seen from that lane (a
 lower bound: one vehicle each). A drive claims an absence
@@ -265,7 +269,9 @@ def _sector(angle: float, mapped) -> int:
     return int(np.argmin((angle - ang) % (2 * math.pi)))
 
 
-def _arm_findings(est, mapped, amap, conf, pas, cfg) -> list:
+def _arm_findings(est, mapped, amap, conf, pas, cfg, arm_moves=None) -> list:
+    """Arms added (estimated, unmatched) and removed (mapped, unmatched: :func:`_arm_absence`
+    with ``arm_moves``, the drive's turns in mapped arms)."""
     out = []
     total = float(sum(pas))
     for e, arm in enumerate(est.arms):
@@ -275,13 +281,37 @@ def _arm_findings(est, mapped, amap, conf, pas, cfg) -> list:
                                  evidence={'passages': pas[e], 'angle_deg': math.degrees(arm.angle)}))
     matched = set(amap.values())
     for m in range(len(mapped.arms)):
-        if m in matched:
-            continue
-        # every arm passage could have been one through this arm (share 1 / arms)
-        lanes = [l.id for l in mapped.arms[m].lanes_in + mapped.arms[m].lanes_out]
-        out.append(_absence('arm_removed', f'arm_removed:{m}', total, 1.0 / len(mapped.arms), cfg,
-                            map_arm=m, map_lanes=lanes))
+        if m not in matched:
+            out.append(_arm_absence(m, mapped, total, arm_moves, cfg))
     return out
+
+
+def _arm_absence(m: int, mapped, total: float, arm_moves, cfg) -> Finding:
+    """``arm_removed`` for mapped arm ``m``: the absence likelihood of the vehicles whose turn
+    the drive saw (the lane rule's turn reasoning, :func:`_lane_absence`, one level up).
+
+    A vehicle's turn is one of the map's arm-to-arm turns; the drive's turn shares are
+    unknown, ``Dirichlet(MOVE_PRIOR)`` over the mapped turns, so the share of the turns into
+    and out of ``m`` is ``S ~ Beta(MOVE_PRIOR |T_m|, MOVE_PRIOR |T \\ T_m|)``, and ``K``
+    vehicles whose turns were seen all avoiding ``m`` have probability ``E[(1 - S)^K]``
+    (:func:`_unknown_turn_llr` with ``h = 1``). A vehicle seen on one arm only says nothing:
+    it may have come from or gone to ``m`` out of sight (short recordings, sensor range).
+    Why: the three AV2 recordings claimed mapped arms removed that no vehicle of the 11 s
+    clip had a reason to drive, from every passage of the main road (share ``1 / arms``).
+
+    ``arm_moves`` None (no turns known: raw detections) or ``turn_absence`` 0: the rule
+    before, every arm passage of the drive missed it with share ``1 / arms``."""
+    lanes = [l.id for l in mapped.arms[m].lanes_in + mapped.arms[m].lanes_out]
+    turns = {(c.key[0], c.key[2]) for c in mapped.connectors}
+    mine = {t for t in turns if m in t}
+    if not cfg.turn_absence or arm_moves is None or not mine or mine == turns:
+        return _absence('arm_removed', f'arm_removed:{m}', total, 1.0 / len(mapped.arms), cfg,
+                        map_arm=m, map_lanes=lanes)
+    k = float(sum(n for (a, b), n in arm_moves.items() if m not in (a, b)))
+    A, B = MOVE_PRIOR * len(mine), MOVE_PRIOR * len(turns - mine)
+    return _absence('arm_removed', f'arm_removed:{m}', k, A / (A + B), cfg, llr=_unknown_turn_llr(k, A, B, 1.0),
+                    map_arm=m, map_lanes=lanes,
+                    evidence={'vehicles_known_turn': k, 'turns_mapped': len(turns), 'turns_of_arm': len(mine)})
 
 
 def _distances(est_l, map_l) -> np.ndarray:
@@ -535,16 +565,20 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     conf = [float(a.confidence) for a in est.arms]
     pas = [arm_passages(c) for c in conf]
     amap = match_arms([a.angle for a in est.arms], [a.angle for a in mapped.arms], cfg.arm_gate_deg)
-    findings = _arm_findings(est, mapped, amap, conf, pas, cfg)
     lanes, by_id = _est_lanes(lanelets)
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
     ident = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
     if traffic is None:           # the turns the estimate's connectors show
         moves, p_dirs = _movements(by_id, amap), None
+        known = any(l.support > 0 for l in by_id.values())      # raw detections: no vehicle counts
+        arm_moves = {(amap[e], b): n for (e, d), per in moves.items() if d == ENTERING
+                     for b, n in per.items()} if known else None
     else:                         # the turns and passages the vehicles showed on the map itself
         moves = {(e, d): traffic.moves.get((m, d), {}) for e, m in amap.items() for d in (ENTERING, LEAVING)}
         p_dirs = {(e, d): float(traffic.passages.get((m, d), 0)) for e, m in amap.items()
                   for d in (ENTERING, LEAVING)}
+        arm_moves = {(a, b): n for (a, d), per in traffic.moves.items() if d == ENTERING for b, n in per.items()}
+    findings = _arm_findings(est, mapped, amap, conf, pas, cfg, arm_moves)
     for e, m in sorted(amap.items()):
         findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
                                    ident[e], moves, p_dirs)

@@ -14,12 +14,15 @@ import copy
 
 import numpy as np
 
-__all__ = ['EDITS', 'EXPECTED', 'apply_edit']
+__all__ = ['EDITS', 'EXPECTED', 'apply_edit', 'WORLD_EDITS', 'world_without_arm']
 
 EDITS = ('arm_removed', 'lane_added', 'lane_removed', 'lane_moved', 'connector_removed')
 #: map edit -> change kind the drives should show
 EXPECTED = {'arm_removed': 'arm_added', 'lane_added': 'lane_removed', 'lane_removed': 'lane_added',
             'lane_moved': 'lane_moved', 'connector_removed': 'connector_added'}
+#: edits of the *world* (the map stays the ground truth) -> the change kind they should show:
+#: ``arm_closed`` = the vehicles of one arm gone (a road closed), the map still has it
+WORLD_EDITS = {'arm_closed': 'arm_removed'}
 
 
 def _lanes(lanelets, kind):
@@ -168,3 +171,48 @@ def drive_variant(scenario, drive: int, share: float = 1.0):
     keep = np.sort(rng.choice(n, size=max(1, int(round(share * n))), replace=False))
     return replace(scenario, tracks=[scenario.tracks[i] for i in keep],
                    seed=int(scenario.seed) * 1000 + int(drive), _cache={})
+
+
+#: a vehicle drove an arm when its true path comes this close to one of the arm's lane center lines [m]
+ARM_TOUCH_M = 1.0
+
+
+def _drove_arm(track, tree) -> bool:
+    return bool(len(track.xy)) and bool((tree.query(track.xy)[0] < ARM_TOUCH_M).any())
+
+
+def world_without_arm(scenario, rng: np.random.Generator):
+    """The world of ``scenario`` with one arm closed: ``(scenario without every vehicle that
+    drove the arm, {'arm': index of the ground truth's arm, 'vehicles': how many were
+    dropped})``, or ``(None, None)`` when no arm qualifies.
+
+    The arm is drawn among the arms the ego does not drive (its sensors ride on it) and some
+    vehicle did (an arm nobody drove is closed already, and nothing can show it). A vehicle
+    drove the arm when its true path comes within ``ARM_TOUCH_M`` of one of the arm's
+    entering or leaving lanes -- by geometry, so that the SUMO family (whose vehicles carry no
+    lanelet route) and Table I are edited alike. The map of such a case is the unchanged
+    ground truth, and the change to find is ``arm_removed`` (:data:`WORLD_EDITS`). Sensor noise
+    is drawn anew (seed ``scenario.seed * 1000 + 999``: another drive of the same place)."""
+    from dataclasses import replace
+    from scipy.spatial import cKDTree
+    from ..evaluate import resample
+    if getattr(scenario, 'real', None):          # recorded data: its vehicles cannot be taken out
+        return None, None
+    gone = {}
+    for a in range(len(scenario.gt.arms)):
+        pts = [resample(np.asarray(l.center, float), 0.25) for l in scenario.gt_lanelets
+               if l.arm == a and l.kind in ('entering', 'leaving')]
+        if not pts:
+            continue
+        tree = cKDTree(np.concatenate(pts))
+        if (tree.query(scenario.ego.xy)[0] < ARM_TOUCH_M).any():
+            continue
+        ids = {i for i, tr in enumerate(scenario.tracks) if _drove_arm(tr, tree)}
+        if ids:
+            gone[a] = ids
+    if not gone:
+        return None, None
+    a = sorted(gone)[int(rng.integers(len(gone)))]
+    keep = [tr for i, tr in enumerate(scenario.tracks) if i not in gone[a]]
+    world = replace(scenario, tracks=keep, seed=int(scenario.seed) * 1000 + 999, _cache={})
+    return world, {'arm': int(a), 'vehicles': len(gone[a])}

@@ -68,8 +68,10 @@ def _drop_arm(r, e):
 
 
 def test_unused_arm_is_unobserved_or_removed_by_passages(tmp_path, cases):
-    """A mapped arm without traffic: 'unobserved' unless the passages that missed it outweigh
-    the prior; the evidence is the (1 - 1/arms)^passages absence likelihood."""
+    """A mapped arm without traffic: 'unobserved' unless the vehicles whose turns the drive
+    saw, all avoiding it, outweigh the prior: ``E[(1 - S)^K]`` with ``S`` the Jeffreys share
+    of the arm's mapped turns; the rule before (``turn_absence=0``): ``(1 - 1/arms)^passages``."""
+    from scipy.special import betaln
     sc, r = cases[5]
     X = _prior(tmp_path, sc.gt_lanelets)
     I, lls = _drop_arm(r, 1)
@@ -79,8 +81,29 @@ def test_unused_arm_is_unobserved_or_removed_by_passages(tmp_path, cases):
     many = compare(I, lls, X)
     (f,) = many.findings
     assert f.kind == 'arm_removed' and many.unobserved == []
-    assert f.log_lr == pytest.approx(-many.passages * np.log(1 - 1 / 3))
-    assert f.evidence['passages'] == pytest.approx(many.passages)
+    k = f.evidence['vehicles_known_turn']
+    # the turns the estimate's connectors show, none into or out of the arm
+    assert k == sum(l.support for l in lls if l.kind == 'connector') > 0
+    a, b = 0.5 * f.evidence['turns_of_arm'], 0.5 * (f.evidence['turns_mapped'] - f.evidence['turns_of_arm'])
+    assert f.log_lr == pytest.approx(-(betaln(a, b + k) - betaln(a, b)))
+    old = compare(I, lls, X, ChangeConfig(turn_absence=0)).findings[0]
+    assert old.log_lr == pytest.approx(-many.passages * np.log(1 - 1 / 3))
+
+
+def test_arm_removed_needs_vehicles_that_could_have_used_it(tmp_path, cases):
+    """Vehicles seen on one arm only (turn unknown) say nothing about a missing arm: they may
+    have come from or gone to it out of sight (the AV2 clips)."""
+    sc, r = cases[5]
+    X = _prior(tmp_path, sc.gt_lanelets)
+    I, lls = _drop_arm(r, 1)
+    for l in lls:
+        if l.kind == 'connector':
+            l.support = 0          # the lanes' vehicles stay, no turn was seen
+    lls[0].support = max(lls[0].support, 1)
+    view = compare(I, lls, X)
+    assert view.findings == [] and view.unobserved == [1]
+    (f,) = [f for f in view.weak if f.kind == 'arm_removed']
+    assert f.evidence['vehicles_known_turn'] == 0 and f.log_lr == 0.0
 
 
 def test_connector_unused_only_for_undriven_turns(tmp_path, cases):
@@ -257,3 +280,39 @@ def test_added_lane_edit_serves_its_neighbours_turns(tmp_path, cases):
     kerb_ends = {c.lane_out if kerb.direction == 1 else c.lane_in for c in X.connectors
                  if kerb.id in (c.lane_in, c.lane_out)}
     assert ends and ends == kerb_ends
+
+
+def test_a_closed_arm_is_found_removed(tmp_path, cases):
+    """World edit ``arm_closed``: every vehicle that drove one arm taken out of the world,
+    the case estimated anew, the map unchanged -> ``arm_removed`` of that arm, found by the
+    vehicles seen turning between the others (the benchmark's ``arm_closed`` row)."""
+    from scipy.spatial import cKDTree
+    from intersection_estimator.evaluate import resample
+    from intersection_estimator.fleet.edits import ARM_TOUCH_M, world_without_arm
+    from intersection_estimator.pipeline import estimate
+    sc, _ = cases[2]
+    world, what = world_without_arm(sc, np.random.default_rng(0))
+    a = what['arm']
+    tree = cKDTree(np.concatenate([resample(np.asarray(l.center, float), 0.25) for l in sc.gt_lanelets
+                                   if l.arm == a and l.kind != 'connector']))
+    assert a != sc.ego.arm and what['vehicles'] == len(sc.tracks) - len(world.tracks) > 0
+    assert all(tree.query(t.xy)[0].min() >= ARM_TOUCH_M for t in world.tracks)
+    X = _prior(tmp_path, sc.gt_lanelets)
+    r = estimate(world.detections('tracked'), seed=0)
+    view = compare(r.intersection, r.lanelets, X, ChangeConfig(), drive_traffic(world.detections('tracked'), X,
+                                                                                 ChangeConfig()))
+    removed = [f for f in view.findings if f.kind == 'arm_removed']
+    (f,) = removed
+    names = {l.name.split('_')[0] for l in X.arms[f.map_arm].lanes_in + X.arms[f.map_arm].lanes_out}
+    assert names == {f'a{a}'} and f.evidence['vehicles_known_turn'] >= 3
+
+
+def test_recorded_worlds_are_not_edited():
+    from dataclasses import dataclass, field
+    from intersection_estimator.fleet.edits import world_without_arm
+
+    @dataclass
+    class Recorded:
+        real: dict = field(default_factory=lambda: {'tracked': object()})
+
+    assert world_without_arm(Recorded(), np.random.default_rng(0)) == (None, None)
