@@ -261,8 +261,10 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
             out.vehicles[lid] = out.vehicles.get(lid, 0) + 1
             offsets.setdefault(lid, []).append(off[match == i])
     cons = [i for (_, d), i in top.items() if not d]
-    ins = [i for (_, d), i in top.items() if d == ENTERING]
-    outs = [i for (_, d), i in top.items() if d == LEAVING]
+    # the turn is taken from the lane the vehicle drove last before the box (a turn pocket's
+    # vehicle drove the through lane longer) to the leaving lane it drove first after it
+    ins = [i for i, c in n.items() if c >= min_points and elements[i].direction == ENTERING]
+    outs = [i for i, c in n.items() if c >= min_points and elements[i].direction == LEAVING]
     turn = None
     if ins and outs:
         last_in = max(ins, key=lambda i: np.flatnonzero(match == i).max())

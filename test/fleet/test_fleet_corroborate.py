@@ -15,6 +15,7 @@ from intersection_estimator.fleet.corroborate import drive_traffic, match_traffi
 from intersection_estimator.fleet.edits import apply_edit
 from intersection_estimator.fleet.prior_map import load_prior_map
 from intersection_estimator.pipeline import in_mode
+from intersection_estimator.model import ENTERING, LEAVING
 
 
 def _prior(tmp_path, lls):
@@ -126,7 +127,6 @@ def test_a_moved_lane_needs_its_vehicles_or_traffic_beside_the_map():
     mapped lanes of its arm direction (a lane moved farther than the matching gate)."""
     from types import SimpleNamespace
     from intersection_estimator.fleet.corroborate import TrafficOnMap
-    from intersection_estimator.model import ENTERING, LEAVING
     X = SimpleNamespace(arms=[SimpleNamespace(angle=0.0), SimpleNamespace(angle=np.pi / 2)])
     f = Finding('lane_moved', 'lane_moved:L', 0.9, map_arm=1, direction='in', map_lanes=['L'])
     assert refutes(f, TrafficOnMap(), X, 0.75, 30.0)
@@ -173,3 +173,21 @@ def test_a_queued_vehicle_uses_its_lane_a_parked_one_does_not(tmp_path, cases):
     m, _ = co._match_points(beyond, np.full_like(beyond, np.nan), np.ones(len(beyond), bool), cKDTree(P), T, I,
                             lane, 1.75)
     assert (m == -1).all()
+
+
+def test_a_turn_starts_from_the_lane_driven_last():
+    """A turn pocket's vehicle drives the through lane longer than the pocket; its turn
+    starts from the pocket (the lane it drove last before the box), and ends on the leaving
+    lane it drove first after it."""
+    from intersection_estimator.fleet import corroborate as co
+    z = np.zeros((2, 2))
+    els = [co._Element('through', 0, ENTERING, z), co._Element('pocket', 0, ENTERING, z),
+           co._Element('out0', 1, LEAVING, z), co._Element('out1', 1, LEAVING, z),
+           co._Element('c', 0, 0, z, ('pocket', 'out0'))]
+    match = np.array([0] * 30 + [1] * 8 + [4] * 6 + [2] * 12 + [3] * 20)
+    tr = co.TrafficOnMap()
+    co._count(tr, els, match, np.zeros(len(match)), 5, {e.id: e.arm for e in els if e.direction}, {})
+    assert tr.turns == {('pocket', 'out0')}
+    assert tr.vehicles == {'through': 1, 'pocket': 1, 'out0': 1, 'out1': 1}
+    assert tr.passages == {(0, ENTERING): 1, (1, LEAVING): 1}
+    assert tr.moves == {(0, ENTERING): {1: 1}, (1, LEAVING): {0: 1}}
