@@ -323,19 +323,21 @@ def _distances(est_l, map_l) -> np.ndarray:
                         [np.asarray(m.center, float) for m in map_l]).T
 
 
-def _pair_lanes(est_l, map_l) -> dict[int, int]:
-    """Estimated lane -> mapped lane by center-line distance (Hungarian)."""
-    if not est_l or not map_l:
+def _pair_lanes(cost) -> dict[int, int]:
+    """Estimated lane -> mapped lane by center-line distance (Hungarian) from their
+    :func:`_distances` (None or empty: no pair)."""
+    if cost is None or not cost.size:
         return {}
-    cost = _distances(est_l, map_l)
-    cost[~np.isfinite(cost)] = 1e6
+    cost = np.where(np.isfinite(cost), cost, 1e6)
     r, c = linear_sum_assignment(cost)
     return {int(i): int(j) for i, j in zip(r, c)}
 
 
-def _lane_identity(e, m, est_lanes, mapped) -> dict:
+def _lane_identity(e, m, est_lanes, mapped) -> tuple[dict, dict]:
     """``{(direction, estimated lane_index): mapped lane index}`` of estimated arm ``e`` and
-    mapped arm ``m``: which mapped lane an estimated lane *is*, by position, not by index.
+    mapped arm ``m``: which mapped lane an estimated lane *is*, by position, not by index;
+    and per direction the :func:`_distances` of its estimated lanes to the mapped lanes of
+    that direction (for :func:`_pair_lanes`: computed once per lane update).
 
     An estimated lane is a mapped lane when each is the other's nearest (mean center-line
     distance, :func:`lane_distance`), the estimated lane's nearest taken over the mapped
@@ -347,12 +349,13 @@ def _lane_identity(e, m, est_lanes, mapped) -> dict:
     their turns as turns the map lacks (docs/fleet.md, rule 6)."""
     marm = mapped.arms[m]
     ml = [(d, j, l) for d in (ENTERING, LEAVING) for j, l in enumerate(marm.lanes(d))]
-    out = {}
+    out, blocks = {}, {}
     for d in (ENTERING, LEAVING):
         el = est_lanes.get((e, d), [])
         if not el or not ml:
             continue
         cost = _distances(el, [y for _, _, y in ml])
+        blocks[d] = cost[:, [k for k, (dm, _, _) in enumerate(ml) if dm == d]]
         cost[~np.isfinite(cost)] = np.inf
         for i, x in enumerate(el):
             if not np.isfinite(cost[i]).any():
@@ -361,7 +364,7 @@ def _lane_identity(e, m, est_lanes, mapped) -> dict:
             dm, j, _ = ml[c]
             if dm == d and int(np.argmin(cost[:, c])) == i:
                 out[(d, x.lane_index)] = j
-    return out
+    return out, blocks
 
 
 def _with_traffic(el) -> list:
@@ -371,17 +374,17 @@ def _with_traffic(el) -> list:
 
 
 def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                   ident, moves, p_dirs=None) -> list:
+                   ident, moves, p_dirs=None, costs=None) -> list:
     """Lane findings of estimated arm ``e`` against mapped arm ``m``; ``ident``: that arm
     pair's :func:`_lane_identity`; ``moves``: :func:`_movements`; ``p_dirs``: the passages of
     each (arm, direction) when the traffic was counted on the map (else from the arm's
-    confidence)."""
+    confidence); ``costs``: per direction the lane distances :func:`_lane_identity` measured."""
     out = []
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
         ml, el, ds = marm.lanes(d), lanes.get((e, d), []), DIRS[d]
         ev = {'passages': pas[e], 'lanes_estimated': int(n_est), 'lanes_mapped': len(ml)}
-        pair = _pair_lanes(el, ml)
+        pair = _pair_lanes((costs or {}).get(d) if el and ml else None)
         has_support = any(l.support > 0 for l in lanes.get((e, ENTERING), []) + lanes.get((e, LEAVING), []))
         if lanes_seen is not None:
             # the mapped lanes the drive's vehicles drove: estimated lanes with traffic that
@@ -567,7 +570,8 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     amap = match_arms([a.angle for a in est.arms], [a.angle for a in mapped.arms], cfg.arm_gate_deg)
     lanes, by_id = _est_lanes(lanelets)
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
-    ident = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
+    pairs = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
+    ident = {e: v[0] for e, v in pairs.items()}
     if traffic is None:           # the turns the estimate's connectors show
         moves, p_dirs = _movements(by_id, amap), None
         known = any(l.support > 0 for l in by_id.values())      # raw detections: no vehicle counts
@@ -581,7 +585,7 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     findings = _arm_findings(est, mapped, amap, conf, pas, cfg, arm_moves)
     for e, m in sorted(amap.items()):
         findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                                   ident[e], moves, p_dirs)
+                                   ident[e], moves, p_dirs, pairs[e][1])
     findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used, ident)
     if traffic is not None:
         findings = [f for f in findings if not refutes(f, traffic, mapped, cfg.moved_m, cfg.arm_gate_deg)]
