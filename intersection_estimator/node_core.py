@@ -148,8 +148,10 @@ class EstimatorCore:
         self.prior = self._load_prior_map(values)
         self._change_keys: frozenset = frozenset()
         self._changes_due = None            # (header, result) to compare with the prior map
+        self._comparing = None              # (header, result, its vehicles matched to the map)
         self._change_t = float('-inf')      # when it was last compared (monotonic) [s]
-        self._change_ms: list = []          # recent costs of that comparison [ms]
+        self._change_ms: list = []          # recent costs of the comparison's second half [ms]
+        self._match_ms: list = []           # ... of its first half, the map matching [ms]
 
     @staticmethod
     def _load_prior_map(values: dict):
@@ -266,7 +268,8 @@ class EstimatorCore:
             # the map comparison of the last lane update (prior_map) runs in a tick of its own,
             # which estimates in what the comparison leaves of the budget
             compare = self._compare_now()
-            reserve += max(self._change_ms, default=0.0) if compare else 0.0
+            reserve += max(self._match_ms if self._comparing is None else self._change_ms,
+                           default=0.0) if compare else 0.0
             budget = self.values['budget_ms']
             floor = 0.1 if compare else 0.5
             result = tick(self.ingest, self.estimator, wall_budget=True, log=self.get_logger().info,
@@ -302,14 +305,8 @@ class EstimatorCore:
                                                    result.log_posterior, result.observations, result.state))
             if result.lanes_updated:          # the newest lane course waits for its tick
                 self._lanes_due = (header, result)
-        change = 0.0
         compare = self._compare_now() if compare is None else compare
-        if compare and self._changes_due is not None:     # the newest lane update against the map
-            tc = time.perf_counter()
-            self._publish_map_changes(*self._changes_due)
-            self._changes_due, self._change_t = None, time.monotonic()
-            change = (time.perf_counter() - tc) * 1e3
-            self._change_ms = (self._change_ms + [change])[-5:]
+        change = self._compare_half() if compare else 0.0
         published = self._lanes_due is not None and self._publish_lanes_now(t0)
         if published:
             self._publish_lanes(*self._lanes_due)
@@ -322,12 +319,34 @@ class EstimatorCore:
         self.pub_diag.publish(self._diagnostics(header, result))
 
     def _compare_now(self) -> bool:
-        """Compare the waiting lane course with the prior map in this tick? When one waits and
-        ``map_changes_period`` has passed since the last comparison (~/map_changes is latched;
-        comparing costs up to ~150 ms on a large junction, so it is not done on every lane
+        """Run half of a comparison with the prior map in this tick? The second half always
+        follows the first in the next tick; a new comparison starts when a lane course waits
+        and ``map_changes_period`` has passed since the last one (~/map_changes is latched;
+        comparing costs up to ~130 ms on a large junction, so it is not done on every lane
         update)."""
-        return self._changes_due is not None and \
-            time.monotonic() - self._change_t >= self.values['map_changes_period']
+        return self._comparing is not None or (
+            self._changes_due is not None
+            and time.monotonic() - self._change_t >= self.values['map_changes_period'])
+
+    def _compare_half(self) -> float:
+        """One half of the comparison of the newest lane update with the prior map, each in a
+        tick of its own (either costs ~60 ms on a large junction, both together more than the
+        budget): first the window's vehicles map-matched to the nearest mapped intersection,
+        then the change rules and ~/map_changes. Returns its cost [ms]."""
+        tc = time.perf_counter()
+        if self._comparing is None:
+            header, result = self._changes_due
+            self._changes_due = None
+            self._comparing = (header, result, self.prior.match(result.intersection, self.estimator.window()))
+            ms = (time.perf_counter() - tc) * 1e3
+            self._match_ms = (self._match_ms + [ms])[-5:]
+            return ms
+        header, result, matched = self._comparing
+        self._publish_map_changes(header, result, matched)
+        self._comparing, self._change_t = None, time.monotonic()
+        ms = (time.perf_counter() - tc) * 1e3
+        self._change_ms = (self._change_ms + [ms])[-5:]
+        return ms
 
     def _publish_lanes_now(self, t0: float) -> bool:
         """Publish the waiting lane course in this tick? Yes when the recent worst cost of
@@ -344,9 +363,8 @@ class EstimatorCore:
 
     def _publish_lanes(self, header, result) -> None:
         """~/lanelets, the markers and the OSM file of ``result`` (latched: subscribers keep
-        the last ones meanwhile); its comparison with the prior map follows in the next tick
-        (map matching the window costs up to ~100 ms on a large junction, and the tick that
-        runs it leaves room for it)."""
+        the last ones meanwhile); its comparison with the prior map follows in the next two
+        ticks (:meth:`_compare_half`; each leaves room for its half)."""
         t = self.types
         self.pub_lanelets.publish(lanelets_msg(t, header, result.lanelets, result.lane_samples))
         markers, self._marker_keys = markers_msg(t, header, result.intersection, result.lanelets,
@@ -371,18 +389,19 @@ class EstimatorCore:
             self._marker_keys, self._lanes_out = frozenset(), False
             self._write_osm([])
             self._change_keys = frozenset()          # DELETEALL took the change markers too
-            self._changes_due = None                  # the previous intersection's comparison
+            self._changes_due = self._comparing = None   # the previous intersection's comparison
             self._publish_map_changes(header, None)
 
-    def _publish_map_changes(self, header, result) -> None:
+    def _publish_map_changes(self, header, result, matched=None) -> None:
         """The estimate against the prior map (when ``prior_map`` is set): ~/map_changes and
-        the ``map_changes`` markers (stale ones deleted); None (after a reset): no changes."""
+        the ``map_changes`` markers (stale ones deleted); None (after a reset): no changes.
+        ``matched``: the estimate's :meth:`.fleet.live.LiveChanges.match`, done a tick before."""
         if self.prior is None:
             return
         from msg_adapters.map_changes import map_change_markers, map_changes_msg
         from .fleet.live import LiveReport
-        report = LiveReport(None) if result is None else self.prior.update(result.intersection, result.lanelets,
-                                                                           self.estimator.window())
+        report = LiveReport(None) if result is None else self.prior.update(
+            result.intersection, result.lanelets, self.estimator.window(), matched=matched)
         self.pub_map_changes.publish(map_changes_msg(self.types, header, report))
         markers, self._change_keys = map_change_markers(self.types, header, report, self._change_keys)
         if markers.markers:
@@ -419,7 +438,7 @@ class EstimatorCore:
               'tick_ms_last': float(ticks[-1]), 'budget_ms': budget,
               'budget_use': float(np.median(ticks)) / budget,
               **dict(zip(('overhead_ms', 'lanes_publish_ms'), self._overheads())),
-              'map_changes_ms': max(self._change_ms, default=0.0)}
+              'map_changes_ms': max(self._change_ms + self._match_ms, default=0.0)}
         if result is not None:
             drawn = result.topology_samples - self._prev_samples
             self._prev_samples = result.topology_samples

@@ -126,9 +126,9 @@ def test_bad_geo_origin_is_refused_naming_it(make_node):
 
 
 def test_prior_map_publishes_map_changes_and_their_markers(make_node, tmp_path):
-    """prior_map set: the newest lane update is compared with the map in the tick after it, at
-    most every map_changes_period (~/map_changes, markers in namespace map_changes); a reset
-    publishes an empty report."""
+    """prior_map set: the newest lane update is compared with the map in the two ticks after
+    it, at most every map_changes_period (~/map_changes, markers in namespace map_changes); a
+    reset publishes an empty report."""
     from intersection_estimator.export.osm import write_osm
     from intersection_estimator.fleet.edits import apply_edit
     from intersection_estimator.sim import simulate_scenario
@@ -141,14 +141,19 @@ def test_prior_map_publishes_map_changes_and_their_markers(make_node, tmp_path):
     # the lanelets go out at once, their comparison with the map in the next tick
     assert node.sent['lanelets'] and 'map_changes' not in node.sent
     assert node._changes_due is not None and node._compare_now()
+    # in two ticks: the window's vehicles matched to the map, then the rules and the message
+    node._publish(None, time.perf_counter(), T_DATA + 0.1)
+    assert 'map_changes' not in node.sent and node._comparing is not None and node._compare_now()
+    assert len(node._match_ms) == 1 and node._comparing[2].mapped is not None
     node._publish(None, time.perf_counter(), T_DATA + 0.2)
     (msg,) = node.sent['map_changes']
-    assert node._changes_due is None and len(node._change_ms) == 1
+    assert node._changes_due is None and node._comparing is None and len(node._change_ms) == 1
     # the next lane update waits for map_changes_period; the newest one is compared then
     node._publish(res, time.perf_counter(), T_DATA + 0.4)
     node._publish(None, time.perf_counter(), T_DATA + 0.6)
     assert len(node.sent['map_changes']) == 1 and not node._compare_now()
     node._change_t -= 600.0
+    node._publish(None, time.perf_counter(), T_DATA + 0.7)
     node._publish(None, time.perf_counter(), T_DATA + 0.8)
     s = node.sent['map_changes'][-1].header.stamp
     assert len(node.sent['map_changes']) == 2 and s.sec + 1e-9 * s.nanosec == pytest.approx(T_DATA + 0.4)

@@ -12,12 +12,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .changes import ChangeConfig, compare
-from .corroborate import drive_traffic
+from .corroborate import TrafficOnMap, drive_traffic
 from .fuse import FusedChange, fuse
 from .match import match_intersection
 from .prior_map import MappedIntersection, load_prior_map
 
-__all__ = ['LiveChanges', 'LiveReport']
+__all__ = ['LiveChanges', 'LiveMatch', 'LiveReport']
 
 #: the drive id of the node's own estimate in the fusion (one drive)
 LIVE = 'live'
@@ -39,6 +39,16 @@ class LiveReport:
         return '' if self.mapped is None else self.mapped.id
 
 
+@dataclass
+class LiveMatch:
+    """The first half of a comparison: the mapped intersection an estimate matched (None:
+    none within the gate) and the drive's vehicles map-matched to it (None: not corroborated).
+    The node runs the halves in two ticks (map matching is the larger one)."""
+
+    mapped: MappedIntersection | None
+    traffic: TrafficOnMap | None = None
+
+
 class LiveChanges:
     """The prior map's intersections and the comparison of an estimate with them."""
 
@@ -51,16 +61,23 @@ class LiveChanges:
         :class:`.prior_map.PriorMapError` (a ValueError) with a one-line reason."""
         return cls(load_prior_map(path, origin=origin, projector=projector), cfg)
 
-    def update(self, intersection, lanelets, window=None) -> LiveReport:
+    def match(self, intersection, window=None) -> LiveMatch:
+        """The mapped intersection nearest an estimate (``model.Intersection``) and the
+        vehicles of ``window`` (the observations the estimate rests on) map-matched to it."""
+        if intersection is None:
+            return LiveMatch(None)
+        X = match_intersection(intersection.center, self.mapped, self.cfg.gate_m)
+        return LiveMatch(X, None if X is None else drive_traffic(window, X, self.cfg))
+
+    def update(self, intersection, lanelets, window=None, matched: LiveMatch | None = None) -> LiveReport:
         """Compare an estimate (``model.Intersection`` + lanelets) with the nearest mapped
         intersection; an estimate near none gives an empty report. ``window``: the
         observations the estimate rests on, whose vehicles, map-matched, drop the claims they
-        contradict (:mod:`.corroborate`)."""
-        if intersection is None:
+        contradict (:mod:`.corroborate`); ``matched``: :meth:`match` of the same estimate,
+        done before (then ``window`` is not looked at)."""
+        m = self.match(intersection, window) if matched is None else matched
+        if intersection is None or m.mapped is None:
             return LiveReport(None)
-        X = match_intersection(intersection.center, self.mapped, self.cfg.gate_m)
-        if X is None:
-            return LiveReport(None)
-        view = compare(intersection, lanelets, X, self.cfg, drive_traffic(window, X, self.cfg))
-        fused = fuse([(LIVE, view)], self.cfg)[X.id]
-        return LiveReport(X, fused.changes, list(fused.unobserved), float(fused.passages))
+        view = compare(intersection, lanelets, m.mapped, self.cfg, m.traffic)
+        fused = fuse([(LIVE, view)], self.cfg)[m.mapped.id]
+        return LiveReport(m.mapped, fused.changes, list(fused.unobserved), float(fused.passages))

@@ -61,3 +61,18 @@ def test_messages_and_markers(live):
     from intersection_estimator.fleet.live import LiveReport
     gone, keys2 = map_change_markers(T, header, LiveReport(None), keys)
     assert keys2 == frozenset() and all(m.action == 2 for m in gone.markers) and len(gone.markers) == len(keys)
+
+
+def test_a_comparison_in_two_halves_reports_what_one_call_does(live, cases):
+    """The node runs map matching and the rules in two ticks (LiveChanges.match, then update
+    with it): the same report as one call with the window."""
+    r, changes, _ = live
+    sc, _ = cases[5]
+    window = sc.detections('tracked')
+    matched = changes.match(r.intersection, window)
+    assert matched.mapped is not None and matched.traffic is not None and matched.traffic.vehicles
+    one = changes.update(r.intersection, r.lanelets, window)
+    two = changes.update(r.intersection, r.lanelets, None, matched=matched)
+    assert [(c.key, c.confidence) for c in two.changes] == [(c.key, c.confidence) for c in one.changes]
+    assert two.unobserved == one.unobserved and two.passages == one.passages
+    assert changes.match(None).mapped is None
