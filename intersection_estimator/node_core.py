@@ -150,8 +150,8 @@ class EstimatorCore:
         self._changes_due = None            # (header, result) to compare with the prior map
         self._comparing = None              # (header, result, its vehicles matched to the map)
         self._change_t = float('-inf')      # when it was last compared (monotonic) [s]
-        self._change_ms: list = []          # recent costs of the comparison's second half [ms]
-        self._match_ms: list = []           # ... of its first half, the map matching [ms]
+        self._change_ms = deque(maxlen=5)   # recent costs of the comparison's second half [ms]
+        self._match_ms = deque(maxlen=5)    # ... of its first half, the map matching [ms]
 
     @staticmethod
     def _load_prior_map(values: dict):
@@ -265,8 +265,8 @@ class EstimatorCore:
             # (_publish_lanes_now): a lane update's estimation keeps the whole budget, a
             # tick with lanelets waiting leaves room for publishing them
             reserve = lanes if self._lanes_due is not None else 0.0
-            # the map comparison of the last lane update (prior_map) runs in a tick of its own,
-            # which estimates in what the comparison leaves of the budget
+            # the map comparison of the last lane update (prior_map) runs in two ticks of their
+            # own, each estimating in what its half of the comparison leaves of the budget
             compare = self._compare_now()
             reserve += max(self._match_ms if self._comparing is None else self._change_ms,
                            default=0.0) if compare else 0.0
@@ -334,18 +334,16 @@ class EstimatorCore:
         budget): first the window's vehicles map-matched to the nearest mapped intersection,
         then the change rules and ~/map_changes. Returns its cost [ms]."""
         tc = time.perf_counter()
-        if self._comparing is None:
+        first = self._comparing is None
+        if first:
             header, result = self._changes_due
             self._changes_due = None
             self._comparing = (header, result, self.prior.match(result.intersection, self.estimator.window()))
-            ms = (time.perf_counter() - tc) * 1e3
-            self._match_ms = (self._match_ms + [ms])[-5:]
-            return ms
-        header, result, matched = self._comparing
-        self._publish_map_changes(header, result, matched)
-        self._comparing, self._change_t = None, time.monotonic()
+        else:
+            self._publish_map_changes(*self._comparing)
+            self._comparing, self._change_t = None, time.monotonic()
         ms = (time.perf_counter() - tc) * 1e3
-        self._change_ms = (self._change_ms + [ms])[-5:]
+        (self._match_ms if first else self._change_ms).append(ms)
         return ms
 
     def _publish_lanes_now(self, t0: float) -> bool:
@@ -395,13 +393,14 @@ class EstimatorCore:
     def _publish_map_changes(self, header, result, matched=None) -> None:
         """The estimate against the prior map (when ``prior_map`` is set): ~/map_changes and
         the ``map_changes`` markers (stale ones deleted); None (after a reset): no changes.
-        ``matched``: the estimate's :meth:`.fleet.live.LiveChanges.match`, done a tick before."""
+        ``matched``: the estimate's :meth:`.fleet.live.LiveChanges.match`, done a tick before
+        (the window it matched is not read again)."""
         if self.prior is None:
             return
         from msg_adapters.map_changes import map_change_markers, map_changes_msg
         from .fleet.live import LiveReport
         report = LiveReport(None) if result is None else self.prior.update(
-            result.intersection, result.lanelets, self.estimator.window(), matched=matched)
+            result.intersection, result.lanelets, matched=matched)
         self.pub_map_changes.publish(map_changes_msg(self.types, header, report))
         markers, self._change_keys = map_change_markers(self.types, header, report, self._change_keys)
         if markers.markers:
@@ -438,7 +437,7 @@ class EstimatorCore:
               'tick_ms_last': float(ticks[-1]), 'budget_ms': budget,
               'budget_use': float(np.median(ticks)) / budget,
               **dict(zip(('overhead_ms', 'lanes_publish_ms'), self._overheads())),
-              'map_changes_ms': max(self._change_ms + self._match_ms, default=0.0)}
+              'map_changes_ms': max([*self._change_ms, *self._match_ms], default=0.0)}
         if result is not None:
             drawn = result.topology_samples - self._prev_samples
             self._prev_samples = result.topology_samples

@@ -85,7 +85,7 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('prior_map', '', "Lanelet2 OSM map to compare the estimate with ('' = off): changes on "
               "~/map_changes and markers (namespace map_changes); projected around geo_origin"),
     ParamSpec('map_changes_period', 2.0, 'the newest lane course is compared with prior_map at most this '
-              'often, in a tick of its own [s]', 0.0, 600.0),
+              'often, in two ticks of their own (map matching, then the rules) [s]', 0.0, 600.0),
 )
 
 _BY_NAME = {p.name: p for p in PARAMS}

@@ -44,8 +44,9 @@ import numpy as np
 
 from intersection_estimator.export.osm import write_osm
 from intersection_estimator.fleet.changes import ChangeConfig, compare
-from intersection_estimator.fleet.corroborate import match_traffic, tracks_of
-from intersection_estimator.fleet.edits import EDITS, EXPECTED, WORLD_EDITS, apply_edit, drive_variant, world_without_arm
+from intersection_estimator.fleet.corroborate import drive_traffic
+from intersection_estimator.fleet.edits import (EDITS, EXPECTED, WORLD_EDITS, apply_edit, arm_lane_points, drive_variant,
+                                                world_without_arm)
 from intersection_estimator.fleet.fuse import fuse
 from intersection_estimator.fleet.prior_map import load_prior_map
 from intersection_estimator.pipeline import estimate
@@ -155,11 +156,6 @@ def _maps(seed: int, sc, tmp: Path) -> dict:
     return out
 
 
-def _traffic(tracks, X):
-    """The drive's vehicles map-matched to ``X`` (None: not corroborated)."""
-    return match_traffic(tracks, X, CFG.match_gate_m, CFG.match_min_points) if tracks else None
-
-
 def _case_rows(seed: int, tmp: Path) -> list[dict]:
     sc = _scenario(seed)
     r = _estimate(sc, seed)
@@ -168,8 +164,8 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
                  'false_incl_unused': False, 'claimed': []} for e in ('none',) + EDITS + tuple(WORLD_EDITS)]
     rows = []
     maps = _maps(seed, sc, tmp)
-    tracks = tracks_of(sc.detections('tracked')) if CFG.corroborate else []
-    view = compare(r.intersection, r.lanelets, maps['none'][1], CFG, _traffic(tracks, maps['none'][1]))
+    dets = sc.detections('tracked')
+    view = compare(r.intersection, r.lanelets, maps['none'][1], CFG, drive_traffic(dets, maps['none'][1], CFG))
     rows.append({'seed': seed, 'edit': 'none', 'applicable': True, 'observable': True, 'hit': not view.findings,
                  'false': any(f.kind != 'connector_unused' for f in view.findings),
                  'false_incl_unused': bool(view.findings), 'claimed': [f.key for f in view.findings]})
@@ -178,7 +174,7 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
         if X is None:
             rows.append({'seed': seed, 'edit': edit, 'applicable': False})
             continue
-        fs = compare(r.intersection, r.lanelets, X, CFG, _traffic(tracks, X)).findings
+        fs = compare(r.intersection, r.lanelets, X, CFG, drive_traffic(dets, X, CFG)).findings
         hits = [f for f in fs if _hit(edit, what, f, X, sc)]
         others = [f for f in fs if f not in hits[:1]]
         rows.append({'seed': seed, 'edit': edit, 'applicable': True, 'observable': _observable(edit, what, sc),
@@ -193,8 +189,7 @@ def _mapped_arm_of(sc, arm: int, X) -> int:
     """The mapped arm whose lanes lie on the ground truth's arm ``arm`` (median distance)."""
     from scipy.spatial import cKDTree
     from intersection_estimator.evaluate import resample
-    tree = cKDTree(np.concatenate([resample(np.asarray(l.center, float), 0.25) for l in sc.gt_lanelets
-                                   if l.arm == arm and l.kind in ('entering', 'leaving')]))
+    tree = cKDTree(arm_lane_points(sc.gt_lanelets, arm))
     return int(np.argmin([np.median(tree.query(np.concatenate([resample(np.asarray(l.center, float))
                                                                for l in a.lanes_in + a.lanes_out]))[0])
                           for a in X.arms]))
@@ -209,8 +204,7 @@ def _closed_arm_row(seed: int, sc, X) -> dict:
     r = _estimate(world, seed)
     m = _mapped_arm_of(sc, what['arm'], X)
     fs = [] if r.intersection is None else compare(
-        r.intersection, r.lanelets, X, CFG,
-        _traffic(tracks_of(world.detections('tracked')) if CFG.corroborate else [], X)).findings
+        r.intersection, r.lanelets, X, CFG, drive_traffic(world.detections('tracked'), X, CFG)).findings
     hits = [f for f in fs if f.kind == 'arm_removed' and f.map_arm == m]
     others = [f for f in fs if f not in hits[:1]]
     return {'seed': seed, 'edit': 'arm_closed', 'applicable': True, 'observable': True, 'what': what,
@@ -244,9 +238,9 @@ def _fusion_case(seed: int, edit: str, drives: int, share: float, tmp: Path):
         drive = drive_variant(sc, d, share)
         r = _estimate(drive, seed * 100 + d)
         if r.intersection is not None:
-            tracks = tracks_of(drive.detections('tracked')) if CFG.corroborate else []
-            views.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X, CFG, _traffic(tracks, X))))
-            views0.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X0, CFG, _traffic(tracks, X0))))
+            dets = drive.detections('tracked')
+            views.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X, CFG, drive_traffic(dets, X, CFG))))
+            views0.append((f'd{d:02d}', compare(r.intersection, r.lanelets, X0, CFG, drive_traffic(dets, X0, CFG))))
     return sc, X, X0, what, views, views0
 
 

@@ -374,17 +374,17 @@ def _with_traffic(el) -> list:
 
 
 def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                   ident, moves, p_dirs=None, costs=None) -> list:
-    """Lane findings of estimated arm ``e`` against mapped arm ``m``; ``ident``: that arm
-    pair's :func:`_lane_identity`; ``moves``: :func:`_movements`; ``p_dirs``: the passages of
-    each (arm, direction) when the traffic was counted on the map (else from the arm's
-    confidence); ``costs``: per direction the lane distances :func:`_lane_identity` measured."""
+                   ident, costs, moves, p_dirs=None) -> list:
+    """Lane findings of estimated arm ``e`` against mapped arm ``m``; ``ident``, ``costs``: that
+    arm pair's :func:`_lane_identity` (lane identities; per direction the lane distances);
+    ``moves``: :func:`_movements`; ``p_dirs``: the passages of each (arm, direction) when the
+    traffic was counted on the map (else from the arm's confidence)."""
     out = []
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
         ml, el, ds = marm.lanes(d), lanes.get((e, d), []), DIRS[d]
         ev = {'passages': pas[e], 'lanes_estimated': int(n_est), 'lanes_mapped': len(ml)}
-        pair = _pair_lanes((costs or {}).get(d) if el and ml else None)
+        pair = _pair_lanes(costs.get(d))
         has_support = any(l.support > 0 for l in lanes.get((e, ENTERING), []) + lanes.get((e, LEAVING), []))
         if lanes_seen is not None:
             # the mapped lanes the drive's vehicles drove: estimated lanes with traffic that
@@ -571,7 +571,7 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     lanes, by_id = _est_lanes(lanelets)
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
     pairs = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
-    ident = {e: v[0] for e, v in pairs.items()}
+    ident = {e: v[0] for e, v in pairs.items()}           # the connector findings need them all
     if traffic is None:           # the turns the estimate's connectors show
         moves, p_dirs = _movements(by_id, amap), None
         known = any(l.support > 0 for l in by_id.values())      # raw detections: no vehicle counts
@@ -585,7 +585,7 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     findings = _arm_findings(est, mapped, amap, conf, pas, cfg, arm_moves)
     for e, m in sorted(amap.items()):
         findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                                   ident[e], moves, p_dirs, pairs[e][1])
+                                   *pairs[e], moves, p_dirs)
     findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used, ident)
     if traffic is not None:
         findings = [f for f in findings if not refutes(f, traffic, mapped, cfg.moved_m, cfg.arm_gate_deg)]

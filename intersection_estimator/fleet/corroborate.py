@@ -14,7 +14,8 @@ independent of the estimator's model. A claim the traffic contradicts is dropped
                        drove beside the mapped lanes of its arm direction either
 ``lane_removed``       a vehicle drove the mapped lane
 ``lane_added``         no vehicle of that arm direction drove outside the mapped lanes
-``arm_removed``        a vehicle drove one of the mapped arm's lanes
+``arm_removed``        a vehicle has a matched position on one of the mapped arm's lanes
+                       (``TOUCH_POINTS``: a short arm gives its vehicles few)
 ``arm_added``          no vehicle drove outside the mapped lanes in that direction
 ``connector_added``    no vehicle went from the mapped entering lane to the mapped leaving
                        lane of the claimed turn
@@ -31,9 +32,9 @@ and a standing vehicle's noise would read as motion) and its heading is their di
 over ``HEADING_S`` (slower than ``MIN_SPEED``: no heading, not matched). Each position is
 matched to the nearest mapped lane or connector whose direction agrees (cos >
 ``HEADING_COS``) within ``match_gate_m`` laterally. A vehicle drove a lane when
-``min_points`` of its positions matched it; its passage of an arm direction and its turn
-come from the lane most of its positions matched there (a connector's turn when only one
-side was seen). Positions outside the box (farther from the mapped center than the
+``min_points`` of its positions matched it; its passage of an arm direction comes from the
+lane most of its positions matched there, its turn from the entering lane it drove last to
+the leaving lane it drove first after it (a connector's turn when only one side was seen). Positions outside the box (farther from the mapped center than the
 nearest lane end) and within the map's reach that match nothing are *off the map*; a
 vehicle with ``min_points`` of them drove outside the mapped lanes, at the arm sector and
 in the direction (towards / away from the center) of those positions. Cyclists and
@@ -55,6 +56,7 @@ from ..evaluate import resample
 from ..lanes.config import LaneConfig
 from ..lanes.init import track_rows
 from ..model import ENTERING, LEAVING
+from ..scenarios.floor import MIN_TRAVEL_M    # a vehicle whose averaged positions span less never drove
 
 __all__ = ['TrafficOnMap', 'match_traffic', 'refutes', 'tracks_of', 'drive_traffic', 'HEADING_S', 'HEADING_COS',
            'STEP_M']
@@ -66,7 +68,6 @@ HEADING_COS = 0.7      # a lane matches a point when their directions agree this
 STEP_M = 0.5           # mapped center lines are sampled this densely for the matching [m]
 #: Autoware labels of road users that keep to no lane (bicycle, pedestrian): the lane course's
 SKIP_LABELS = LaneConfig().skip_labels
-MIN_TRAVEL_M = 3.0      # a vehicle whose averaged positions span less never drove (floor.MIN_TRAVEL_M)
 REACH_GATE_DEG = 30.0   # a point belongs to the mapped arm this close in angle for the map's reach
 TOUCH_POINTS = 1         # positions on a mapped arm's lanes that show a vehicle drove the arm (refutes its removal)
 
@@ -241,10 +242,11 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
            arm_of: dict, offsets: dict) -> None:
     """One vehicle's matched elements: every lane ``min_points`` of its positions matched (a
     turn pocket's vehicle drives the through lane first) with their offsets; its passage of
-    each arm direction and its turn from the lane most of its positions matched there (its
-    entering lane and the leaving lane after it; the connector most of its positions matched
-    when it was seen on one side only)."""
-    n = {int(i): np.count_nonzero(match == i) for i in np.unique(match[match >= 0])}
+    each arm direction from the lane most of its positions matched there; its turn from the
+    entering lane it drove last to the leaving lane it drove first after it (the connector
+    most of its positions matched when it was seen on one side only)."""
+    at = {int(i): np.flatnonzero(match == i) for i in np.unique(match[match >= 0])}   # its positions per element
+    n = {i: len(k) for i, k in at.items()}
     top: dict = {}
     for i, c in n.items():
         key = (elements[i].arm, elements[i].direction)
@@ -259,7 +261,7 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
         if elements[i].direction and c >= min_points:
             lid = elements[i].id
             out.vehicles[lid] = out.vehicles.get(lid, 0) + 1
-            offsets.setdefault(lid, []).append(off[match == i])
+            offsets.setdefault(lid, []).append(off[at[i]])
     cons = [i for (_, d), i in top.items() if not d]
     # the turn is taken from the lane the vehicle drove last before the box (a turn pocket's
     # vehicle drove the through lane longer) to the leaving lane it drove first after it
@@ -267,10 +269,10 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
     outs = [i for i, c in n.items() if c >= min_points and elements[i].direction == LEAVING]
     turn = None
     if ins and outs:
-        last_in = max(ins, key=lambda i: np.flatnonzero(match == i).max())
-        after = [i for i in outs if np.flatnonzero(match == i).min() > np.flatnonzero(match == last_in).max()]
+        last_in = max(ins, key=lambda i: at[i][-1])
+        after = [i for i in outs if at[i][0] > at[last_in][-1]]
         if after:
-            turn = (elements[last_in].id, elements[min(after, key=lambda i: np.flatnonzero(match == i).min())].id)
+            turn = (elements[last_in].id, elements[min(after, key=lambda i: at[i][0])].id)
     if turn is None and cons:
         # seen on one side only: the mapped turn it followed (connectors from one lane overlap
         # at their start, so the lanes decide where both were seen: a turn the map lacks

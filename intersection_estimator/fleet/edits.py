@@ -14,7 +14,7 @@ import copy
 
 import numpy as np
 
-__all__ = ['EDITS', 'EXPECTED', 'apply_edit', 'WORLD_EDITS', 'world_without_arm']
+__all__ = ['EDITS', 'EXPECTED', 'apply_edit', 'WORLD_EDITS', 'world_without_arm', 'arm_lane_points']
 
 EDITS = ('arm_removed', 'lane_added', 'lane_removed', 'lane_moved', 'connector_removed')
 #: map edit -> change kind the drives should show
@@ -181,6 +181,15 @@ def _drove_arm(track, tree) -> bool:
     return bool(len(track.xy)) and bool((tree.query(track.xy)[0] < ARM_TOUCH_M).any())
 
 
+def arm_lane_points(lanelets, arm: int, step: float = 0.25) -> np.ndarray:
+    """Points every ``step`` metres along the center lines of the entering and leaving
+    lanelets of ``arm`` (``(0, 2)`` when it has none)."""
+    from ..evaluate import resample
+    pts = [resample(np.asarray(l.center, float), step) for l in lanelets
+           if l.arm == arm and l.kind in ('entering', 'leaving')]
+    return np.concatenate(pts) if pts else np.zeros((0, 2))
+
+
 def world_without_arm(scenario, rng: np.random.Generator):
     """The world of ``scenario`` with one arm closed: ``(scenario without every vehicle that
     drove the arm, {'arm': index of the ground truth's arm, 'vehicles': how many were
@@ -195,16 +204,14 @@ def world_without_arm(scenario, rng: np.random.Generator):
     is drawn anew (seed ``scenario.seed * 1000 + 999``: another drive of the same place)."""
     from dataclasses import replace
     from scipy.spatial import cKDTree
-    from ..evaluate import resample
     if getattr(scenario, 'real', None):          # recorded data: its vehicles cannot be taken out
         return None, None
     gone = {}
     for a in range(len(scenario.gt.arms)):
-        pts = [resample(np.asarray(l.center, float), 0.25) for l in scenario.gt_lanelets
-               if l.arm == a and l.kind in ('entering', 'leaving')]
-        if not pts:
+        pts = arm_lane_points(scenario.gt_lanelets, a)
+        if not len(pts):
             continue
-        tree = cKDTree(np.concatenate(pts))
+        tree = cKDTree(pts)
         if (tree.query(scenario.ego.xy)[0] < ARM_TOUCH_M).any():
             continue
         ids = {i for i, tr in enumerate(scenario.tracks) if _drove_arm(tr, tree)}
