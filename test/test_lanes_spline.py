@@ -9,8 +9,8 @@ import pytest
 
 from intersection_estimator.lanes import LaneConfig
 from intersection_estimator.lanes.init import arc_bezier, lane_specs, trajectories, assign_parts
-from intersection_estimator.lanes.spline import (connector_pieces, fit_connector, prefer_fit,
-                                                 sample_curve, traffic_connector)
+from intersection_estimator.lanes.spline import (connector_pieces, fit_connector, noise_variance,
+                                                 prefer_fit, sample_curve, traffic_connector)
 from intersection_estimator.evaluate import lane_distance
 from intersection_estimator.pipeline import estimate
 from intersection_estimator.sim import simulate_scenario
@@ -188,3 +188,40 @@ def test_the_traffic_picks_the_penalty():
         ctrl, knots = fit_connector(pieces, c0, [1, 0], c1, [0, 1], **kw)
         err[name] = lane_distance(sample_curve(ctrl, knots, 0.5, 6)[0], truth)
     assert err['chosen'] < err['weak'], err
+
+
+def _quarter_turn(r=8.0):
+    """A 90 deg right-angle turn of radius ``r`` between two straight 10 m runs."""
+    phi = np.linspace(0.0, np.pi / 2, 150)
+    arc = np.stack([r * np.sin(phi), r - r * np.cos(phi)], axis=1)
+    lead = np.stack([np.linspace(-10.0, 0.0, 40, endpoint=False), np.zeros(40)], axis=1)
+    tail = arc[-1] + np.linspace(0.0, 10.0, 40)[1:, None] * np.array([0.0, 1.0])
+    return np.concatenate([lead, arc, tail])
+
+
+@pytest.mark.parametrize('sigma', [0.3, 1.0])
+def test_noise_variance_reads_the_sensors_noise_off_curved_paths(sigma):
+    """White noise of ``sigma`` on vehicles turning at 10 Hz (0.7 m per cycle) reads back
+    within 15 %; too few rows read 0 (unknown)."""
+    rng = np.random.default_rng(3)
+    runs = _noisy_runs(_quarter_turn(), rng, runs=6, noise=sigma, step=0.7)
+    assert noise_variance(runs) == pytest.approx(sigma ** 2, rel=0.15)
+    assert noise_variance([runs[0][:5]]) == 0.0
+
+
+def test_known_noise_lets_one_vehicle_shape_a_tight_turn():
+    """One vehicle through a tight turn, 1 m noise: Akaike's criterion on that one path's
+    few metres smooths the corner away; with the noise known (Mallows) the corner is kept.
+    Mean error over 30 draws."""
+    truth = _quarter_turn()
+    grid = np.geomspace(0.01, 10.0, 4)
+    err = {0.0: [], 1.0: []}
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        pieces = connector_pieces(_noisy_runs(truth, rng, runs=1, noise=1.0, step=0.7),
+                                  truth[0], truth[-1])
+        for nv in err:
+            fit = fit_connector(pieces, truth[0], [1, 0], truth[-1], [0, 1], smooth_grid=grid,
+                                noise_var=nv)
+            err[nv].append(lane_distance(sample_curve(*fit, 0.5, 6)[0], truth))
+    assert np.mean(err[1.0]) < 0.92 * np.mean(err[0.0]), {k: np.mean(v) for k, v in err.items()}

@@ -25,6 +25,9 @@ _RANGES = {
     'traffic_smooth_steps': ('[0, 50]', 'candidate penalties from traffic_smooth_min to traffic_smooth '
                              '(log spaced), the traffic picks one per connector by Akaike\'s '
                              'criterion (lanes/spline.py); < 2: traffic_smooth alone'),
+    'traffic_noise': ('[0, 1]', '1: the penalty is chosen against the positions\' noise read from '
+                      'all trajectories (Mallows\' criterion, lanes/spline.py), 0: against each '
+                      'connector\'s own residuals (Akaike\'s)'),
     'traffic_min_points': ('[3, 1e6]', 'fewest trajectory points to shape a connector'),
     'traffic_select': ('[0.0, 1000.0]', 'the fit replaces the start shape only when better by this '
                        'per parameter (2: Akaike; 0: always)'),
@@ -117,8 +120,9 @@ class LaneConfig:
     traffic_presmooth: int = 5
     traffic_ctrl_spacing: float = 4.0
     traffic_smooth: float = 10.0
-    traffic_smooth_min: float = 0.1
-    traffic_smooth_steps: int = 3
+    traffic_smooth_min: float = 0.01
+    traffic_smooth_steps: int = 4
+    traffic_noise: int = 1
     traffic_min_points: int = 10
     traffic_select: float = 2.0
     follow_lanes: int = 1

@@ -30,7 +30,7 @@ from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
 from .follow import arm_shift, follow_borders
-from .spline import traffic_connector
+from .spline import noise_variance, traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
            'lane_specs', 'lane_id', 'connector_id']
@@ -502,6 +502,8 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
             key = (tr.lane_in, tr.lane_out)
             count[key] = count.get(key, 0) + 1
             driven.setdefault(key, []).append(tr.xy)
+    # the positions' noise, read once from all the scene's vehicles (lanes/spline.py)
+    noise = noise_variance([tr.xy for tr in trajs]) if cfg.traffic_noise else 0.0
     for ((a, k), (b, j)), m in sorted(count.items()):
         if m < cfg.min_connector_evidence:
             continue
@@ -511,7 +513,7 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
         E, O = specs[e], specs[o]
         left, right = _connector_borders(E, O, cfg)
         if cfg.connector_traffic:
-            shaped = traffic_connector(E, O, driven[((a, k), (b, j))], cfg, (left, right))
+            shaped = traffic_connector(E, O, driven[((a, k), (b, j))], cfg, (left, right), noise)
             left, right = shaped if shaped is not None else (left, right)
         n_st = len(left)
         lk = [E.left_keys[-1]] + [None] * (n_st - 2) + [O.left_keys[0]]

@@ -43,7 +43,7 @@ from numba import njit
 from .likelihood import window_d2
 
 __all__ = ['connector_pieces', 'fit_connector', 'sample_curve', 'prefer_fit', 'traffic_connector',
-           'moving_average', 'second_differences', 'aic_prefers']
+           'moving_average', 'second_differences', 'aic_prefers', 'noise_variance']
 
 
 def moving_average(xy: np.ndarray, n: int, tail: bool = True) -> np.ndarray:
@@ -105,14 +105,16 @@ def _params(piece: np.ndarray) -> np.ndarray:
 def fit_connector(pieces: list[np.ndarray], c0, t0, c1, t1, *, ctrl_spacing: float = 4.0,
                   smooth: float = 1.0, min_points: int = 10, iters: int = 3,
                   smooth_grid=(), corr_length: float = 4.0, penalty: float = 2.0,
-                  clip: float = 3.0):
+                  clip: float = 3.0, noise_var: float = 0.0):
     """(control points (n, 2), knots) of the clamped cubic B-spline (module docstring),
     or None. The points' parameters start as their pieces' normalised arc length and
     are then ``iters`` times re-set to their foot points on the fitted curve (the spline
     parameter is not arc length: without this the fit is pulled towards the chord).
 
     ``smooth_grid`` (beyond the paper): candidate penalties; at every step the one of the
-    best information criterion is taken (:func:`_fit_nb`); empty: ``smooth`` alone."""
+    best information criterion is taken (:func:`_fit_nb`); empty: ``smooth`` alone.
+    ``noise_var`` > 0: the positions' noise variance is known (:func:`noise_variance`) and
+    the criterion is Mallows' instead of Akaike's."""
     pieces = [p for p in pieces if len(p) >= 3]
     if sum(len(p) for p in pieces) < min_points:
         return None
@@ -129,7 +131,7 @@ def fit_connector(pieces: list[np.ndarray], c0, t0, c1, t1, *, ctrl_spacing: flo
     ctrl = np.empty((n, 2))
     D = second_differences(n)
     ok = _fit_nb(Q, u, knots, D.T @ D, c0, t0, c1, t1, grid * len(Q) / n, int(iters),
-                 max(metres / corr_length, 1.0), float(penalty), float(clip), ctrl)
+                 max(metres / corr_length, 1.0), float(penalty), float(clip), float(noise_var), ctrl)
     return (ctrl, knots) if ok else None
 
 
@@ -280,7 +282,7 @@ def _feet(Q, curve, u, clip, warm):
 
 
 @njit(cache=True)
-def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, out):
+def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, clip, noise_var, out):
     """The fit of :func:`fit_connector` into ``out``; False when no weight gives a valid
     fit (the end handles ``alpha``, ``beta`` must point into the turn).
 
@@ -292,8 +294,11 @@ def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, c
     2, as the selection rules here and in ``lanes/follow.py``). ``RSS``: squared
     distances of the points to the curve, clipped at ``clip``; ``m_eff``: the metres the
     pieces cover / ``corr_length`` (the points of one vehicle are not independent);
-    ``edf``: trace of the hat matrix ``(G + w S)^-1 G``. The points' parameters are then
-    re-set to their foot points on the kept curve."""
+    ``edf``: trace of the hat matrix ``(G + w S)^-1 G``. With ``noise_var`` > 0 (the
+    positions' noise variance, read from all the scene's trajectories) the score is Mallows'
+    ``RSS / noise_var + penalty * edf`` instead: a corner cut costs what it costs against
+    the known noise, not against the connector's own few points. The points' parameters are
+    then re-set to their foot points on the kept curve."""
     n = len(knots) - 4
     nz = 2 + 2 * (n - 4)
     G, S = np.empty((nz, nz)), np.empty((nz, nz))
@@ -325,7 +330,9 @@ def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, c
             u_try[:] = u
             rss = _feet(Q, curve, u_try, clip, it > 0)
             score = 0.0
-            if len(weights) > 1:
+            if len(weights) > 1 and noise_var > 0:
+                score = rss / noise_var + penalty * np.trace(sol[:, 1:])
+            elif len(weights) > 1:
                 score = m_eff * np.log(max(rss, 1e-12)) + penalty * np.trace(sol[:, 1:])
             if score < best:
                 best = score
@@ -335,6 +342,21 @@ def _fit_nb(Q, u0, knots, DtD, c0, t0, c1, t1, weights, iters, m_eff, penalty, c
             return False
         u[:] = u_best
     return True
+
+
+def noise_variance(trajs_xy: list[np.ndarray], min_rows: int = 20) -> float:
+    """Variance per coordinate of the positions' noise [m^2], read from all trajectories:
+    the second differences ``x_{i+1} - 2 x_i + x_{i-1}`` of white noise of variance ``s2`` have
+    variance ``6 s2`` per coordinate, a vehicle's own motion adds centimetres at 10 Hz; so
+    their squared lengths are exponential with mean ``12 s2`` and ``s2 = median / (12 ln 2)``
+    (robust to the few rows of a manoeuvre or a jump). Noise a tracker smoothed reads
+    smaller, and the connectors then follow their traffic more closely. 0 when fewer than
+    ``min_rows`` second differences exist."""
+    d2 = [xy[2:] - 2.0 * xy[1:-1] + xy[:-2] for xy in trajs_xy if len(xy) >= 3]
+    if not d2 or sum(len(d) for d in d2) < min_rows:
+        return 0.0
+    q = np.sum(np.concatenate(d2) ** 2, axis=1)
+    return float(np.median(q)) / (12.0 * math.log(2.0))
 
 
 def smooth_grid(cfg) -> np.ndarray:
@@ -395,7 +417,7 @@ def prefer_fit(pieces, fitted: np.ndarray, start: np.ndarray, n_params: int,
     return aic_prefers(len(Q), _rss(Q, start, clip), _rss(Q, fitted, clip), n_params, penalty)
 
 
-def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):
+def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None, noise_var: float = 0.0):
     """Left/right borders of the connector from lanelet spec ``E`` to ``O`` shaped by
     ``trajs_xy`` (the trajectories that drove it), or None (too little traffic, or --
     given the caller's ``start`` borders -- the fit does not beat them by
@@ -409,7 +431,8 @@ def traffic_connector(E, O, trajs_xy: list[np.ndarray], cfg, start=None):
     pieces = connector_pieces(trajs_xy, c0, c1, cfg.traffic_presmooth)
     fit = fit_connector(pieces, c0, t0, c1, t1, ctrl_spacing=cfg.traffic_ctrl_spacing,
                         smooth=cfg.traffic_smooth, min_points=cfg.traffic_min_points,
-                        smooth_grid=smooth_grid(cfg), corr_length=cfg.follow_corr_length)
+                        smooth_grid=smooth_grid(cfg), corr_length=cfg.follow_corr_length,
+                        noise_var=noise_var)
     if fit is None:
         return None
     C, T = sample_curve(*fit, cfg.connector_spacing, cfg.connector_min_stations)
