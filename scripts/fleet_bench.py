@@ -56,6 +56,7 @@ from intersection_estimator.sim import simulate_scenario
 FAST = {'timer_period': 1.0, 'topology_samples': 1500, 'lane_samples': 3000}
 CACHE: Path | None = None     # --cache: estimates kept between runs (they do not depend on the map)
 FAMILY = 'table1'             # --family
+WORLD = True                  # --no-world: skip the world edits (each estimates its case anew)
 CFG = ChangeConfig()
 
 
@@ -161,7 +162,7 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
     r = _estimate(sc, seed)
     if r.intersection is None:
         return [{'seed': seed, 'edit': e, 'applicable': True, 'observable': True, 'hit': False, 'false': False,
-                 'false_incl_unused': False, 'claimed': []} for e in ('none',) + EDITS + tuple(WORLD_EDITS)]
+                 'false_incl_unused': False, 'claimed': []} for e in ('none',) + EDITS + (tuple(WORLD_EDITS) if WORLD else ())]
     rows = []
     maps = _maps(seed, sc, tmp)
     dets = sc.detections('tracked')
@@ -181,7 +182,8 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
                      'what': what, 'hit': bool(hits),
                      'false': any(f.kind != 'connector_unused' for f in others),
                      'false_incl_unused': bool(others), 'claimed': [f.key for f in fs]})
-    rows.append(_closed_arm_row(seed, sc, maps['none'][1]))
+    if WORLD:
+        rows.append(_closed_arm_row(seed, sc, maps['none'][1]))
     return rows
 
 
@@ -214,7 +216,7 @@ def _closed_arm_row(seed: int, sc, X) -> dict:
 
 def _kind_table(rows: list[dict]) -> list[dict]:
     out = []
-    for edit in ('none',) + EDITS + tuple(WORLD_EDITS):
+    for edit in ('none',) + EDITS + (tuple(WORLD_EDITS) if WORLD else ()):
         rs = [r for r in rows if r['edit'] == edit and r['applicable']]
         n = len(rs)
         obs = [r for r in rs if r['observable']]
@@ -338,9 +340,12 @@ def main() -> int:
                     help='ChangeConfig field for this run (e.g. change_prior=0.05); default: the package defaults')
     ap.add_argument('--json', default=None, help='write all figures here')
     ap.add_argument('--cache', default=None, help='keep estimates here between runs (map-independent)')
+    ap.add_argument('--no-world', action='store_true',
+                    help='map edits only: skip the world edits (arm_closed), which estimate each case anew')
     args = ap.parse_args()
-    global CACHE, FAMILY, CFG
+    global CACHE, FAMILY, CFG, WORLD
     FAMILY = args.family
+    WORLD = not args.no_world
     from dataclasses import replace
     CFG = replace(CFG, **{k: float(v) for k, v in (a.split('=', 1) for a in args.set)})
     CFG.validate()

@@ -58,7 +58,8 @@ import math
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.special import hyp2f1
+from scipy.special import gammaln, hyp2f1
+from scipy.stats import beta as beta_dist
 
 from ..evaluate import _cost_matrix, lane_distance, resample
 from ..model import ENTERING, LEAVING
@@ -80,6 +81,8 @@ _RANGES = {'gate_m': ('(0, inf)', 'estimate <-> mapped intersection gate [m]'),
            'min_confidence': ('(0, 1)', 'fused confidence to report a change'),
            'change_prior': ('(0, 1)', 'prior probability of a positive change (added / moved)'),
            'share_concentration': ('[0, inf)', 'spread of traffic shares in the absence model (0: off)'),
+           'share_from_traffic': ('[0, 1]', "1: a missing lane's share spread is read from the drive's "
+                                  'lane choices on the map (tracked input)'),
            'turn_absence': ('[0, 1]', "1: a missing lane's evidence is the vehicles of the turns it serves"),
            'corroborate': ('[0, 1]', "1: claims the drive's map-matched vehicles contradict are dropped"),
            'match_gate_m': ('(0, inf)', 'a vehicle is on a mapped lane within this lateral distance [m]'),
@@ -103,6 +106,10 @@ class ChangeConfig:
     # SUMO arms 62, Table I under-dispersed. Default 0 (see docs/fleet.md: 3 costs Table I's
     # lane_removed recall 98 -> 55 %)
     share_concentration: float = 0.0
+    # the spread of a lane's share of its turns is read from the drive itself: how evenly its
+    # vehicles chose among the mapped lanes serving the same turn on the *other* arm directions
+    # (lane_concentration; needs the map-matched traffic, else share_concentration)
+    share_from_traffic: int = 1
     # a mapped lane serves its mapped turns: only vehicles of those turns can show it missing
     # (_lane_absence; 0 = any vehicle of the direction, the rule before)
     turn_absence: int = 1
@@ -224,11 +231,11 @@ def _lane_conf(lanes) -> float:
     return 1.0 - math.exp(-sum(l.support for l in lanes) / 3.0)
 
 
-def _absence_llr(passages: float, share: float, cfg) -> float:
+def _absence_llr(passages: float, share: float, cfg, k: float | None = None) -> float:
     """Log LR "gone : still there" of ``passages`` that all missed an element taking ``share``
-    of them (:func:`_absence`)."""
+    of them (:func:`_absence`; ``k``: the share's concentration, default the config's)."""
     share = min(max(share, 1e-9), 1.0 - 1e-9)
-    k = cfg.share_concentration
+    k = cfg.share_concentration if k is None else k
     if k > 0:
         a, b = share * k, (1.0 - share) * k
         return -(math.lgamma(b + passages) + math.lgamma(a + b) - math.lgamma(b) - math.lgamma(a + b + passages))
@@ -374,11 +381,12 @@ def _with_traffic(el) -> list:
 
 
 def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                   ident, costs, moves, p_dirs=None) -> list:
+                   ident, costs, moves, p_dirs=None, choices=None) -> list:
     """Lane findings of estimated arm ``e`` against mapped arm ``m``; ``ident``, ``costs``: that
     arm pair's :func:`_lane_identity` (lane identities; per direction the lane distances);
     ``moves``: :func:`_movements`; ``p_dirs``: the passages of each (arm, direction) when the
-    traffic was counted on the map (else from the arm's confidence)."""
+    traffic was counted on the map (else from the arm's confidence); ``choices``: the drive's
+    lane choices (:func:`_choice_groups`; None: ``share_concentration``)."""
     out = []
     arm, marm = est.arms[e], mapped.arms[m]
     for d, n_est in ((ENTERING, arm.lanes_in), (LEAVING, arm.lanes_out)):
@@ -412,9 +420,10 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
             if p_dirs is not None:
                 p_dir = p_dirs.get((e, d), 0.0)
             index = {l.id: j for j, l in enumerate(ml)}
+            conc = None if choices is None else lane_choice(choices, (m, d))
             for g in gone:
                 out.append(_lane_absence(g, index[g], m, d, p_dir, len(ml), mapped,
-                                         moves.get((e, d), {}), cfg, map_arm=m, direction=ds, evidence=ev))
+                                         moves.get((e, d), {}), cfg, conc, map_arm=m, direction=ds, evidence=ev))
         else:
             counts_ok.add((m, ds))
             # the mapped lane each estimated lane is by position (not its index: a lane in
@@ -449,6 +458,17 @@ def _movements(by_id: dict, amap: dict) -> dict:
     return out
 
 
+def _lane_moves(traffic, arm, d: int) -> dict:
+    """Mapped arm -> vehicles seen on a lane of ``arm``, direction ``d``, turning to (entering)
+    or coming from (leaving) it (``traffic.lane_turns`` summed over the direction's lanes)."""
+    out: dict = {}
+    ids = {l.id for l in arm.lanes(d)}
+    for (lid, other), n in traffic.lane_turns.items():
+        if lid in ids:
+            out[other] = out.get(other, 0.0) + float(n)
+    return out
+
+
 def _served(mapped, m: int, d: int) -> dict:
     """Mapped lane index of arm ``m``, direction ``d`` -> the mapped arms its mapped turns lead
     to (entering) or come from (leaving)."""
@@ -466,16 +486,124 @@ def _served(mapped, m: int, d: int) -> dict:
 MOVE_PRIOR = 0.5
 
 
-def _unknown_turn_llr(passages: float, a: float, b: float, h: float) -> float:
+def _unknown_turn_llr(passages: float, a: float, b: float, h: float, k: float = 0.0) -> float:
     """Log LR "gone" of ``passages`` whose turns were not seen, all of which missed a lane that
     takes a share ``h * pi`` of them, ``pi ~ Beta(a, b)`` the share of the turns it serves:
-    ``-ln E[(1 - h pi)^P] = -ln 2F1(-P, a; a + b; h)`` (``h = 1``: ``B(a, b + P) / B(a, b)``)."""
+    ``-ln E[(1 - h pi)^P] = -ln 2F1(-P, a; a + b; h)`` (``h = 1``: ``B(a, b + P) / B(a, b)``).
+    ``k`` > 0: the lane's share of its turns varies too, ``Beta(k h, k (1 - h))``, and the
+    expectation is taken over it at :data:`_QUAD` quantiles."""
     if passages <= 0.0:
         return 0.0
-    return -math.log(max(float(hyp2f1(-passages, a, a + b, min(h, 1.0))), 1e-300))
+    h = min(max(h, 1e-9), 1.0 - 1e-9)
+    hs = beta_dist.ppf(_QUAD, k * h, k * (1.0 - h)) if k > 0 else np.array([h])
+    return -math.log(max(float(np.mean(hyp2f1(-passages, a, a + b, np.clip(hs, 0.0, 1.0)))), 1e-300))
 
 
-def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, **kw) -> Finding:
+#: quantile levels of the expectation over a lane's share in :func:`_unknown_turn_llr`
+_QUAD = (np.arange(32) + 0.5) / 32
+#: lane-choice concentrations a drive is read among (:func:`lane_concentration`); beyond the
+#: last, exact shares (multinomial) are taken
+CONCENTRATIONS = np.geomspace(0.05, 500.0, 41)
+
+
+def _choice_groups(traffic, mapped) -> tuple[dict, dict]:
+    """What the drive's vehicles showed of their lane choice, per ``(mapped arm, direction)``:
+    the lane counts of every mapped turn that two or more mapped lanes of the direction serve
+    (the vehicles seen driving each of those lanes taking it, ``traffic.lane_turns``; turns
+    with fewer than two such vehicles show no choice), and ``[off, seen]``: of the vehicles
+    seen on a lane of the direction taking a mapped turn, how many were on a lane the map does
+    not give that turn (a late lane change, a matching slip)."""
+    groups: dict = {}
+    off: dict = {}
+    for a in mapped.arms:
+        for d in (ENTERING, LEAVING):
+            ml = a.lanes(d)
+            served = _served(mapped, a.index, d)
+            for b, lanes in _turn_lanes(served).items():
+                c = [traffic.lane_turns.get((ml[j].id, b), 0) for j in lanes if j < len(ml)]
+                if len(c) >= 2 and sum(c) >= 2:
+                    groups.setdefault((a.index, d), []).append(np.asarray(c, float))
+                n = [traffic.lane_turns.get((l.id, b), 0) for l in ml]
+                bad = sum(x for j, x in enumerate(n) if b not in served.get(j, ()))
+                if sum(n):
+                    tot = off.setdefault((a.index, d), [0, 0])
+                    tot[0], tot[1] = tot[0] + bad, tot[1] + sum(n)
+    return groups, off
+
+
+def _turn_lanes(served: dict) -> dict:
+    """Mapped turn -> the lane indices that serve it (:func:`_served` turned around)."""
+    out: dict = {}
+    for j, turns in sorted(served.items()):
+        for b in turns:
+            out.setdefault(b, []).append(j)
+    return out
+
+
+def _choice_loglik(c: np.ndarray) -> np.ndarray:
+    """Log likelihood of one turn's lane counts ``c`` under a symmetric Dirichlet-multinomial
+    of concentration ``k`` (each lane ``k / n``), per :data:`CONCENTRATIONS`, and last under
+    exact equal shares (the multinomial); the multinomial coefficient, common to all, left out."""
+    n, K = len(c), float(c.sum())
+    k = CONCENTRATIONS[:, None]
+    dm = (gammaln(k[:, 0]) - gammaln(k[:, 0] + K)
+          + np.sum(gammaln(k / n + c[None, :]) - gammaln(k / n), axis=1))
+    return np.r_[dm, -K * math.log(n)]
+
+
+@dataclass(frozen=True)
+class LaneChoice:
+    """How the drive's vehicles chose their lanes (:func:`lane_choice`): ``post`` the posterior
+    ``[(k, weight), ...]`` of the concentration of a lane's share of a turn (``k = 0``: exact
+    equal shares); ``off`` the probability that a vehicle is seen on a lane the map does not
+    give its turn."""
+
+    post: tuple
+    off: float = 0.0
+
+
+def lane_concentration(groups: dict, skip) -> list:
+    """How evenly the drive's vehicles chose among mapped lanes serving the same turn: the
+    posterior ``[(k, weight), ...]`` over :data:`CONCENTRATIONS` and exact shares (``k = 0``,
+    the model without spread), a flat prior over those points and the likelihood
+    :func:`_choice_loglik` of every arm direction but ``skip`` (the one whose lane is judged:
+    its own empty lane must not vouch for itself). Real drivers, and SUMO's, keep to one lane
+    of a turn; Table I's routes pick uniformly -- the drive says which world it is in, and a
+    drive that shows few choices leaves it open (the prior)."""
+    ll = np.zeros(len(CONCENTRATIONS) + 1)
+    for key, cs in groups.items():
+        if key != skip:
+            for c in cs:
+                ll += _choice_loglik(c)
+    w = np.exp(ll - ll.max())
+    w /= w.sum()
+    return [(float(k), float(p)) for k, p in zip(np.r_[CONCENTRATIONS, 0.0], w) if p > 1e-6]
+
+
+def lane_choice(choices: tuple[dict, dict], skip) -> LaneChoice:
+    """:class:`LaneChoice` of the drive from :func:`_choice_groups`, every arm direction but
+    ``skip``: the concentration's posterior (:func:`lane_concentration`) and the off-map share,
+    the posterior mean under a Jeffreys prior, ``(off + 0.5) / (seen + 1)``."""
+    groups, off = choices
+    bad = sum(v[0] for key, v in off.items() if key != skip)
+    seen = sum(v[1] for key, v in off.items() if key != skip)
+    return LaneChoice(tuple(lane_concentration(groups, skip)), (bad + 0.5) / (seen + 1.0))
+
+
+def _turn_llr(K: float, n_b: int, k: float, off: float) -> float:
+    """Log LR "gone" of ``K`` vehicles of a turn that ``n_b`` mapped lanes serve, all seen off
+    the lane: its share of the turn ``f`` (``1 / n_b``, or ``Beta(k / n_b, k (n_b - 1) / n_b)``
+    with ``k`` > 0), a vehicle on it seen there with probability ``1 - off``:
+    ``-ln E[(1 - (1 - off) f)^K]``."""
+    if K <= 0:
+        return 0.0
+    if k > 0 and n_b > 1:
+        a = k / n_b
+        return -math.log(max(float(hyp2f1(-K, a, k, 1.0 - off)), 1e-300))
+    return -K * math.log(max(1.0 - (1.0 - off) / n_b, 1e-9))
+
+
+def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=None, **kw) -> Finding:
     """``lane_removed`` for mapped lane ``j`` of arm ``m``, direction ``d``: the absence
     likelihood of the passages that *could* have used it.
 
@@ -494,12 +622,21 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, **kw) ->
       ``1 / n_b`` averaged over its turns): :func:`_unknown_turn_llr`.
 
     A mapped lane without mapped turns could have taken any vehicle of its direction:
-    ``(1 - 1 / n_lanes)^p_dir``, the rule before."""
+    ``(1 - 1 / n_lanes)^p_dir``, the rule before.
+
+    ``conc``: the drive's :class:`LaneChoice` (None: ``share_concentration``, nothing seen
+    off the map's lanes); the likelihood is averaged over its concentration, and a vehicle
+    is seen off its lane with its ``off`` share."""
     served = _served(mapped, m, d) if cfg.turn_absence else {}
     mine = served.get(j, set())
+    post = ((cfg.share_concentration, 1.0),) if conc is None else conc.post
+    eps = 0.0 if conc is None else conc.off
+    kw['evidence'] = {**kw.get('evidence', {}), 'lane_off_share': eps,
+                      'lane_choice_concentration': max(post, key=lambda kp: kp[1])[0]}
     if not mine:
+        llr = _mixed(post, lambda k: _absence_llr(p_dir, 1.0 / n_lanes, cfg, k))
         return _absence('lane_removed', f'lane_removed:{lane_id}', p_dir, 1.0 / n_lanes, cfg,
-                        map_lanes=[lane_id], **kw)
+                        llr=llr, map_lanes=[lane_id], **kw)
     offered = set().union(*served.values())
     n_b = {b: sum(b in s for s in served.values()) for b in offered}
     k = {b: moves.get(b, 0.0) for b in offered}
@@ -508,13 +645,22 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, **kw) ->
     A = sum(k[b] + MOVE_PRIOR for b in mine)
     B = sum(k[b] + MOVE_PRIOR for b in offered - mine)
     h = sum((k[b] + MOVE_PRIOR) / n_b[b] for b in mine) / A
-    llr = sum(_absence_llr(k[b], 1.0 / n_b[b], cfg) for b in mine) + _unknown_turn_llr(unknown, A, B, h)
+    llr = _mixed(post, lambda c: sum(_turn_llr(k[b], n_b[b], c, eps) for b in mine)
+                 + _unknown_turn_llr(unknown, A, B, (1.0 - eps) * h, c))
     share = h * A / (A + B)
     passages = sum(k[b] for b in mine) + unknown * share
     kw['evidence'] = {**kw.get('evidence', {}), 'turns_served': sorted(mine), 'passages_turns': known,
                       'vehicles_its_turns': sum(k[b] for b in mine), 'passages_unknown_turn': unknown}
     return _absence('lane_removed', f'lane_removed:{lane_id}', passages, share, cfg, llr=llr,
                     map_lanes=[lane_id], **kw)
+
+
+def _mixed(post, llr_at) -> float:
+    """Log LR "gone" averaged over a posterior ``[(k, weight), ...]`` of the share's
+    concentration: ``-ln sum_k w_k exp(-llr(k))`` (the likelihoods, not their logs, average)."""
+    terms = [math.log(w) - llr_at(k) for k, w in post]
+    top = max(terms)
+    return -(top + math.log(sum(math.exp(t - top) for t in terms)))
 
 
 def _connector_findings(est, mapped, amap, lanes_by_id, conf, pas, cfg, counts_ok, used, ident) -> list:
@@ -572,20 +718,24 @@ def compare(est, lanelets, mapped, cfg: ChangeConfig = ChangeConfig(), traffic=N
     counts_ok, used, lanes_seen, lane_conf = set(), set(), set(), {}
     pairs = {e: _lane_identity(e, m, lanes, mapped) for e, m in sorted(amap.items())}
     ident = {e: v[0] for e, v in pairs.items()}           # the connector findings need them all
+    choices = _choice_groups(traffic, mapped) if traffic is not None and cfg.share_from_traffic else None
     if traffic is None:           # the turns the estimate's connectors show
         moves, p_dirs = _movements(by_id, amap), None
         known = any(l.support > 0 for l in by_id.values())      # raw detections: no vehicle counts
         arm_moves = {(amap[e], b): n for (e, d), per in moves.items() if d == ENTERING
                      for b, n in per.items()} if known else None
     else:                         # the turns and passages the vehicles showed on the map itself
-        moves = {(e, d): traffic.moves.get((m, d), {}) for e, m in amap.items() for d in (ENTERING, LEAVING)}
+        # a lane's absence: the vehicles seen on a lane of its direction taking each turn (one
+        # seen in the box only chose no lane there); the arm's: every turn seen
+        moves = {(e, d): _lane_moves(traffic, mapped.arms[m], d) for e, m in amap.items()
+                 for d in (ENTERING, LEAVING)}
         p_dirs = {(e, d): float(traffic.passages.get((m, d), 0)) for e, m in amap.items()
                   for d in (ENTERING, LEAVING)}
         arm_moves = {(a, b): n for (a, d), per in traffic.moves.items() if d == ENTERING for b, n in per.items()}
     findings = _arm_findings(est, mapped, amap, conf, pas, cfg, arm_moves)
     for e, m in sorted(amap.items()):
         findings += _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_seen, lane_conf,
-                                   *pairs[e], moves, p_dirs)
+                                   *pairs[e], moves, p_dirs, choices)
     findings += _connector_findings(est, mapped, amap, by_id, conf, pas, cfg, counts_ok, used, ident)
     if traffic is not None:
         findings = [f for f in findings if not refutes(f, traffic, mapped, cfg.moved_m, cfg.arm_gate_deg)]

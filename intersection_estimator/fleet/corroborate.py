@@ -83,6 +83,7 @@ class TrafficOnMap:
     off_map: list = field(default_factory=list)     # (angle [rad] about the center, direction) per vehicle
     passages: dict = field(default_factory=dict)    # (mapped arm, direction) -> vehicles on its lanes
     moves: dict = field(default_factory=dict)       # (mapped arm, direction) -> {other arm: vehicles}
+    lane_turns: dict = field(default_factory=dict)  # (mapped lane id, other arm) -> vehicles seen on it taking that turn
 
 
 @dataclass(frozen=True)
@@ -267,12 +268,12 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
     # vehicle drove the through lane longer) to the leaving lane it drove first after it
     ins = [i for i, c in n.items() if c >= min_points and elements[i].direction == ENTERING]
     outs = [i for i, c in n.items() if c >= min_points and elements[i].direction == LEAVING]
+    last_in = max(ins, key=lambda i: at[i][-1]) if ins else None
+    after = [i for i in outs if last_in is None or at[i][0] > at[last_in][-1]]
+    first_out = min(after, key=lambda i: at[i][0]) if after else None
     turn = None
-    if ins and outs:
-        last_in = max(ins, key=lambda i: at[i][-1])
-        after = [i for i in outs if at[i][0] > at[last_in][-1]]
-        if after:
-            turn = (elements[last_in].id, elements[min(after, key=lambda i: at[i][0])].id)
+    if last_in is not None and first_out is not None:
+        turn = (elements[last_in].id, elements[first_out].id)
     if turn is None and cons:
         # seen on one side only: the mapped turn it followed (connectors from one lane overlap
         # at their start, so the lanes decide where both were seen: a turn the map lacks
@@ -284,6 +285,12 @@ def _count(out: TrafficOnMap, elements, match: np.ndarray, off: np.ndarray, min_
         for key, other in (((a, ENTERING), b), ((b, LEAVING), a)):
             per = out.moves.setdefault(key, {})
             per[other] = per.get(other, 0) + 1
+        # the lane choice it showed, on each side where it was seen on a lane of the turn's
+        # arm (a vehicle seen in the box only chose no lane there: it missed none)
+        for i, arm, other in ((last_in, a, b), (first_out, b, a)):
+            if i is not None and elements[i].arm == arm:
+                key = (elements[i].id, other)
+                out.lane_turns[key] = out.lane_turns.get(key, 0) + 1
 
 
 def _off_map(traffic: TrafficOnMap, angle: float, direction, gate: float) -> int:

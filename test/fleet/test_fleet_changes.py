@@ -316,3 +316,76 @@ def test_recorded_worlds_are_not_edited():
         real: dict = field(default_factory=lambda: {'tracked': object()})
 
     assert world_without_arm(Recorded(), np.random.default_rng(0)) == (None, None)
+
+
+def _map_k(post):
+    return max(post, key=lambda kp: kp[1])[0]
+
+
+def test_lane_choice_concentration_is_read_from_the_other_directions():
+    """Even lane choice (Table I's routes) reads as exact shares (k = 0) with most of the
+    posterior; every turn on one of its lanes (SUMO's drivers, and real ones) as a small
+    concentration; the judged direction's own counts are left out; nothing seen leaves the
+    flat prior."""
+    from intersection_estimator.fleet.changes import CONCENTRATIONS, lane_concentration
+    even = {(0, 1): [np.array([5.0, 5.0]), np.array([4.0, 6.0])], (1, 1): [np.array([3.0, 3.0, 4.0])]}
+    post = lane_concentration(even, skip=None)
+    assert _map_k(post) == 0.0 or _map_k(post) > 100
+    assert sum(w for k, w in post if 0 < k < 1) < 0.01
+    lumpy = {(0, 1): [np.array([10.0, 0.0]), np.array([0.0, 8.0])], (1, 1): [np.array([7.0, 0.0, 0.0])]}
+    post = lane_concentration(lumpy, skip=None)
+    assert 0 < _map_k(post) < 0.5 and sum(w for k, w in post if k == 0 or k > 10) < 0.01
+    assert lane_concentration({**even, (2, 1): [np.array([0.0, 30.0])]}, skip=(2, 1)) == \
+        lane_concentration(even, skip=None)
+    flat = lane_concentration({}, skip=None)
+    assert len(flat) == len(CONCENTRATIONS) + 1 and np.allclose([w for _, w in flat], 1 / len(flat))
+    assert sum(w for _, w in post) == pytest.approx(1.0, rel=1e-4)
+
+
+def test_lumpy_lane_choice_leaves_an_empty_lane_unclaimed():
+    """12 vehicles went through on lane 0 of two through lanes: with exact shares lane 1 is
+    removed (12 ln 2 nats); where the drive shows its vehicles keep to one lane of a turn
+    (k = 0.2) an empty lane is what such traffic looks like and the claim is not made; a
+    posterior over k averages the likelihoods."""
+    from math import exp, log
+    from intersection_estimator.fleet.changes import LaneChoice, _lane_absence
+    from intersection_estimator.model import ENTERING
+    X = _turns_map([(0, 0, 1, 0), (0, 1, 1, 0), (0, 2, 2, 0)])
+    cfg = ChangeConfig()
+    exact = _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {1: 12.0}, cfg, LaneChoice(((0.0, 1.0),)))
+    assert exact.log_lr == pytest.approx(12.0 * log(2.0)) and exact.confidence > 0.99
+    lumpy = _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {1: 12.0}, cfg, LaneChoice(((0.2, 1.0),)))
+    assert 0 < lumpy.log_lr < 1.0 and lumpy.confidence < 0.5
+    assert lumpy.evidence['lane_choice_concentration'] == 0.2
+    half = _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {1: 12.0}, cfg,
+                         LaneChoice(((0.0, 0.5), (0.2, 0.5))))
+    assert half.log_lr == pytest.approx(-log(0.5 * exp(-exact.log_lr) + 0.5 * exp(-lumpy.log_lr)))
+    # unseen turns: the expectation runs over the lane's varying share too
+    unseen = _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {}, cfg, LaneChoice(((0.2, 1.0),)))
+    assert 0 < unseen.log_lr < _lane_absence('L1', 1, 0, ENTERING, 12.0, 3, X, {}, cfg).log_lr
+
+
+def test_a_vehicle_seen_off_its_turns_lane_is_not_proof():
+    """Lane 2 alone serves the right turn; one vehicle seen turning right from another lane
+    would, by the map, make lane 2 impossible (~20 nats). A drive whose vehicles are seen on
+    a lane the map does not give their turn in 1 of 10 cases makes it ln 10 per vehicle; the
+    share is read from the other arm directions (Jeffreys: (off + 0.5) / (seen + 1))."""
+    from math import log
+    from types import SimpleNamespace
+    from intersection_estimator.fleet.changes import LaneChoice, _choice_groups, _lane_absence, lane_choice
+    from intersection_estimator.model import ENTERING, LEAVING
+    X = _turns_map([(0, 0, 1, 0), (0, 1, 1, 0), (0, 2, 2, 0)])
+    cfg = ChangeConfig()
+    sure = _lane_absence('L2', 2, 0, ENTERING, 1.0, 3, X, {2: 1.0}, cfg, LaneChoice(((0.0, 1.0),), 0.0))
+    assert sure.log_lr > 15
+    slip = _lane_absence('L2', 2, 0, ENTERING, 1.0, 3, X, {2: 1.0}, cfg, LaneChoice(((0.0, 1.0),), 0.1))
+    assert slip.log_lr == pytest.approx(log(10.0)) and slip.evidence['lane_off_share'] == 0.1
+    # read from a drive: arm 1's leaving lane 0 is the only one mapped from arm 0, 9 vehicles
+    # on it and 1 on a leaving lane 1 the map gives no turn from arm 0
+    lane = lambda i: SimpleNamespace(id=i)
+    arms = [SimpleNamespace(index=0, lanes=lambda d: [lane('a'), lane('b'), lane('c')] if d == ENTERING else []),
+            SimpleNamespace(index=1, lanes=lambda d: [lane('x'), lane('y')] if d == LEAVING else [])]
+    X.arms = arms
+    traffic = SimpleNamespace(lane_turns={('x', 0): 9, ('y', 0): 1, ('c', 2): 1})
+    choice = lane_choice(_choice_groups(traffic, X), skip=(0, ENTERING))
+    assert choice.off == pytest.approx(1.5 / 11.0)

@@ -191,3 +191,22 @@ def test_a_turn_starts_from_the_lane_driven_last():
     assert tr.vehicles == {'through': 1, 'pocket': 1, 'out0': 1, 'out1': 1}
     assert tr.passages == {(0, ENTERING): 1, (1, LEAVING): 1}
     assert tr.moves == {(0, ENTERING): {1: 1}, (1, LEAVING): {0: 1}}
+    assert tr.lane_turns == {('pocket', 1): 1, ('out0', 0): 1}
+
+
+def test_a_vehicle_seen_in_the_box_only_chose_no_lane():
+    """Its turn is known from the connector it followed (the arms' turn counts keep it), but
+    it was seen on no lane of one side: it chose no lane there and missed none (a missing
+    lane's evidence, ``lane_turns``); on the side where it was seen on a lane it chose that."""
+    from intersection_estimator.fleet import corroborate as co
+    z = np.zeros((2, 2))
+    els = [co._Element('in0', 0, ENTERING, z), co._Element('out0', 1, LEAVING, z),
+           co._Element('c', 0, 0, z, ('in0', 'out0'))]
+    arm_of = {e.id: e.arm for e in els if e.direction}
+    box_only = co.TrafficOnMap()
+    co._count(box_only, els, np.array([2] * 12), np.zeros(12), 5, arm_of, {})
+    assert box_only.moves == {(0, ENTERING): {1: 1}, (1, LEAVING): {0: 1}}
+    assert box_only.lane_turns == {}
+    entering = co.TrafficOnMap()
+    co._count(entering, els, np.array([0] * 8 + [2] * 12), np.zeros(20), 5, arm_of, {})
+    assert entering.lane_turns == {('in0', 1): 1}
