@@ -51,7 +51,8 @@ def _cmd(args) -> int:
     from .report import summary_lines
     try:
         cfg = ChangeConfig(moved_m=args.moved_m, min_confidence=args.min_confidence,
-                           corroborate=int(not args.no_corroborate), turn_absence=int(not args.any_lane_absence))
+                           corroborate=int(not args.no_corroborate), turn_absence=int(not args.any_lane_absence),
+                           share_from_traffic=int(not args.even_lane_choice))
         doc = run_fleet(args.bags, args.map, args.out, engine=args.engine, workers=args.workers,
                         address=args.address, params_file=args.params, origin=tuple(args.origin),
                         projector=args.projector, cfg=cfg, progress=not args.quiet)
@@ -83,6 +84,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="keep claims the drive's map-matched vehicles contradict (the estimate alone)")
     p.add_argument('--any-lane-absence', action='store_true',
                    help='a missing lane: every vehicle of its direction counts, not only those of its turns')
+    p.add_argument('--even-lane-choice', action='store_true',
+                   help="a missing lane: the lanes of a turn carry exactly equal shares of it (not read from "
+                        "the drive's lane choices on the other arms)")
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=_cmd)
     return p
