@@ -17,9 +17,11 @@ Meyer, Walter, Lauer 2020 (arXiv 2007.06904) fit 1-D cubic B-splines to the traf
    ``P_{n-2} = c1 - beta t1``, ``P_{n-1} = c1`` (end points shared, tangents continuous;
    ``alpha``, ``beta`` and the inner control points are the unknowns); the points'
    parameters are then re-set to their foot points on the curve and the fit repeated;
-   the penalty is the traffic's choice among ``smooth_grid`` at every round (Akaike's
-   criterion, :func:`_fit_nb`): a tight turn gets a weak one, a wide turn seen through
-   sensor noise a strong one (beyond the 2020 paper, which fixes it);
+   the penalty is the traffic's choice among ``smooth_grid`` at every round (Mallows'
+   criterion against the positions' noise read from all the scene's vehicles,
+   :func:`noise_variance`, or Akaike's when it is unknown; :func:`_fit_nb`): a tight turn
+   gets a weak one, a wide turn seen through sensor noise a strong one (beyond the 2020
+   paper, which fixes it);
 3. the curve is sampled at equal arc length (``spacing``) -- the connector's stations;
 4. it replaces the start shape only where it explains the traffic better by more than
    ``traffic_select`` per free parameter (:func:`prefer_fit`; 2 = Akaike's criterion).
