@@ -23,8 +23,9 @@ _RANGES = {
                        'candidate when traffic_smooth_steps >= 2)'),
     'traffic_smooth_min': ('[0.0, 1e6]', 'smallest candidate penalty of a traffic connector'),
     'traffic_smooth_steps': ('[0, 50]', 'candidate penalties from traffic_smooth_min to traffic_smooth '
-                             '(log spaced), the traffic picks one per connector by Akaike\'s '
-                             'criterion (lanes/spline.py); < 2: traffic_smooth alone'),
+                             '(log spaced), the traffic picks one per connector (Mallows\' or '
+                             'Akaike\'s criterion, traffic_noise; lanes/spline.py); < 2: '
+                             'traffic_smooth alone'),
     'traffic_noise': ('[0, 1]', '1: the penalty is chosen against the positions\' noise read from '
                       'all trajectories (Mallows\' criterion, lanes/spline.py), 0: against each '
                       'connector\'s own residuals (Akaike\'s)'),
