@@ -207,6 +207,9 @@ def test_noise_variance_reads_the_sensors_noise_off_curved_paths(sigma):
     runs = _noisy_runs(_quarter_turn(), rng, runs=6, noise=sigma, step=0.7)
     assert noise_variance(runs) == pytest.approx(sigma ** 2, rel=0.15)
     assert noise_variance([runs[0][:5]]) == 0.0
+    # every row published twice: the repeats are not read as noise-free motion
+    twice = [np.repeat(r, 2, axis=0) for r in runs]
+    assert noise_variance(twice) == pytest.approx(noise_variance(runs))
 
 
 def test_known_noise_lets_one_vehicle_shape_a_tight_turn():

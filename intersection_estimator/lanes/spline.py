@@ -353,12 +353,20 @@ def noise_variance(trajs_xy: list[np.ndarray], min_rows: int = 20) -> float:
     their squared lengths are exponential with mean ``12 s2`` and ``s2 = median / (12 ln 2)``
     (robust to the few rows of a manoeuvre or a jump). Noise a tracker smoothed reads
     smaller, and the connectors then follow their traffic more closely. 0 when fewer than
-    ``min_rows`` second differences exist."""
-    d2 = [xy[2:] - 2.0 * xy[1:-1] + xy[:-2] for xy in trajs_xy if len(xy) >= 3]
+    ``min_rows`` second differences exist. Rows that repeat the previous position (a message
+    published twice, two sensors' copies of one object) are dropped first: their zero
+    differences would read as no noise."""
+    d2 = [xy[2:] - 2.0 * xy[1:-1] + xy[:-2] for xy in map(_moved_rows, trajs_xy) if len(xy) >= 3]
     if not d2 or sum(len(d) for d in d2) < min_rows:
         return 0.0
     q = np.sum(np.concatenate(d2) ** 2, axis=1)
     return float(np.median(q)) / (12.0 * math.log(2.0))
+
+
+def _moved_rows(xy: np.ndarray) -> np.ndarray:
+    """The rows of ``xy`` that differ from the row before them (the first always)."""
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    return xy[np.r_[True, np.any(np.diff(xy, axis=0) != 0.0, axis=1)]] if len(xy) else xy
 
 
 def smooth_grid(cfg) -> np.ndarray:
