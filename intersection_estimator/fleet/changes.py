@@ -42,7 +42,10 @@ that lane refutes it (``DriveView.lanes_seen``), and a drive that matched a mapp
 refutes its removal, whatever the arm's confidence (:meth:`DriveView.contradiction`).
 With ``turn_absence`` the passages are the vehicles that could have used the element: for a
 lane those of the turns the map gives it (:func:`_lane_absence`), for an arm those seen
-turning between the other arms (:func:`_arm_absence`).
+turning between the other arms (:func:`_arm_absence`). With ``share_from_traffic`` a lane's
+share of its turns is not taken as exactly ``1 / n``: how evenly the drive's vehicles spread
+over the lanes of a turn, and how often one is seen on a lane the map does not give its turn,
+are read from the drive's other arm directions (:func:`lane_choice`).
 A mapped connector is only judged when the drive's vehicles left its entering lane through
 another connector to a matched arm; its passages are the turns seen from that lane (a
 lower bound: one vehicle each). A drive claims an absence
