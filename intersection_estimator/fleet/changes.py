@@ -234,15 +234,22 @@ def _lane_conf(lanes) -> float:
     return 1.0 - math.exp(-sum(l.support for l in lanes) / 3.0)
 
 
-def _absence_llr(passages: float, share: float, cfg, k: float | None = None) -> float:
+def _absence_llr(passages: float, share: float, cfg, k: float | None = None, off: float = 0.0) -> float:
     """Log LR "gone : still there" of ``passages`` that all missed an element taking ``share``
-    of them (:func:`_absence`; ``k``: the share's concentration, default the config's)."""
+    of them (:func:`_absence`; ``k``: the share's concentration, default the config's).
+    ``off``: the probability that a passage on the element is seen elsewhere (a late lane
+    change, a matching slip), so each misses it with ``1 - (1 - off) f``:
+    ``-ln E[(1 - (1 - off) f)^P] = -ln 2F1(-P, k share; k; 1 - off)``."""
     share = min(max(share, 1e-9), 1.0 - 1e-9)
     k = cfg.share_concentration if k is None else k
+    if passages <= 0.0:
+        return 0.0
+    if k > 0 and off > 0:
+        return -math.log(max(float(hyp2f1(-passages, share * k, k, 1.0 - off)), 1e-300))
     if k > 0:
         a, b = share * k, (1.0 - share) * k
         return -(math.lgamma(b + passages) + math.lgamma(a + b) - math.lgamma(b) - math.lgamma(a + b + passages))
-    return -passages * math.log1p(-share)
+    return -passages * math.log1p(-(1.0 - off) * share)
 
 
 def _absence(kind, key, passages, share, cfg, llr=None, **kw) -> Finding:
@@ -593,19 +600,6 @@ def lane_choice(choices: tuple[dict, dict], skip) -> LaneChoice:
     return LaneChoice(tuple(lane_concentration(groups, skip)), (bad + 0.5) / (seen + 1.0))
 
 
-def _turn_llr(K: float, n_b: int, k: float, off: float) -> float:
-    """Log LR "gone" of ``K`` vehicles of a turn that ``n_b`` mapped lanes serve, all seen off
-    the lane: its share of the turn ``f`` (``1 / n_b``, or ``Beta(k / n_b, k (n_b - 1) / n_b)``
-    with ``k`` > 0), a vehicle on it seen there with probability ``1 - off``:
-    ``-ln E[(1 - (1 - off) f)^K]``."""
-    if K <= 0:
-        return 0.0
-    if k > 0 and n_b > 1:
-        a = k / n_b
-        return -math.log(max(float(hyp2f1(-K, a, k, 1.0 - off)), 1e-300))
-    return -K * math.log(max(1.0 - (1.0 - off) / n_b, 1e-9))
-
-
 def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=None, **kw) -> Finding:
     """``lane_removed`` for mapped lane ``j`` of arm ``m``, direction ``d``: the absence
     likelihood of the passages that *could* have used it.
@@ -648,7 +642,7 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=Non
     A = sum(k[b] + MOVE_PRIOR for b in mine)
     B = sum(k[b] + MOVE_PRIOR for b in offered - mine)
     h = sum((k[b] + MOVE_PRIOR) / n_b[b] for b in mine) / A
-    llr = _mixed(post, lambda c: sum(_turn_llr(k[b], n_b[b], c, eps) for b in mine)
+    llr = _mixed(post, lambda c: sum(_absence_llr(k[b], 1.0 / n_b[b], cfg, c, eps) for b in mine)
                  + _unknown_turn_llr(unknown, A, B, (1.0 - eps) * h, c))
     share = h * A / (A + B)
     passages = sum(k[b] for b in mine) + unknown * share
