@@ -503,7 +503,8 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
             count[key] = count.get(key, 0) + 1
             driven.setdefault(key, []).append(tr.xy)
     # the positions' noise, read once from all the scene's vehicles (lanes/spline.py)
-    noise = noise_variance([tr.xy for tr in trajs]) if cfg.traffic_noise else 0.0
+    noise = noise_variance([tr.xy for tr in trajs]) \
+        if cfg.traffic_noise and cfg.connector_traffic and count else 0.0
     for ((a, k), (b, j)), m in sorted(count.items()):
         if m < cfg.min_connector_evidence:
             continue
