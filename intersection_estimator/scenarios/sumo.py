@@ -32,7 +32,7 @@ from .base import FamilyScenario
 from .floor import drove, label_points, traffic_counts, traffic_lines
 from .sumo_config import SumoConfig
 from .sumo_demand import EGO_ID, sources_sinks, write_routes
-from .sumo_gt import net_gt, read_net
+from .sumo_gt import CLUSTER_M, net_gt, read_net
 from .sumo_net import generate_net, ind_net
 from .sumo_run import read_fcd, run_sumo
 
@@ -159,7 +159,9 @@ def sumo_scenario(seed: int, cfg: SumoConfig = SumoConfig(), sim: SimConfig = Si
         folder.mkdir(parents=True, exist_ok=True)
         net_path, junction, info = _network(g_net, cfg, folder)
         net = read_net(net_path)
-        gt, _, junction = net_gt(net, junction, arm_length=cfg.gt_arm_length_m)
+        # a generated net's junction is its node C alone (sumo_gt module doc); inD rings cluster
+        gt, _, junction = net_gt(net, junction, arm_length=cfg.gt_arm_length_m,
+                                 cluster_m=CLUSTER_M if junction is None else 0.0)
         duration = float(g_time.uniform(*cfg.duration))
         end = cfg.warmup_s + duration
         only = _road_pairs(net, gt) if cfg.road_only else None

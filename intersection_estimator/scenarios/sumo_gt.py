@@ -7,9 +7,13 @@ internal ``via`` lanes). Internal lanes of a *real* junction (a node joined to t
 more other nodes) are connector segments -- those of the junction under test form the
 box, those of a neighbouring junction end the arms there; internal lanes of a node
 with two neighbours (a turn pocket's split node, a shape node) are plain lane pieces.
-Real junctions joined by an edge shorter than :data:`CLUSTER_M` are one junction (the
-inD nets draw some intersections as a ring of nodes): their internal lanes and the
-lanes of the short edges between them are all connector segments of that cluster.
+Real junctions joined by an edge shorter than ``cluster_m`` (default :data:`CLUSTER_M`)
+are one junction (the inD nets draw some intersections as a ring of nodes): their
+internal lanes and the lanes of the short edges between them are all connector segments
+of that cluster. A generated net knows its junction under test (node ``C``) and passes
+``cluster_m=0``: its neighbouring junction ``N<arm>`` is a junction of its own even when
+the two boxes leave less than 25 m of road between them (issue 15: no arm from a
+neighbouring junction's traffic).
 Then :func:`~.lanegraph.gt_from_lane_graph` builds the intersection and lanelets.
 """
 
@@ -37,7 +41,7 @@ def junction_of(internal_lane_id: str) -> str:
     return internal_lane_id[1:].rsplit('_', 2)[0]
 
 
-def _clusters(net) -> dict:
+def _clusters(net, cluster_m: float = CLUSTER_M) -> dict:
     """{node id: cluster id} of the real junctions (module doc)."""
     real = set()
     for node in net.getNodes():
@@ -49,7 +53,7 @@ def _clusters(net) -> dict:
     pairs = []
     for e in net.getEdges(withInternal=False):
         a, b = e.getFromNode().getID(), e.getToNode().getID()
-        if a in real and b in real and a != b and e.getLength() < CLUSTER_M:
+        if a in real and b in real and a != b and e.getLength() < cluster_m:
             pairs.append((a, b))          # node positions of hand-drawn nets mislead: by edge
     return {n: g[0] for g in components(sorted(real), pairs) for n in g}
 
@@ -63,10 +67,10 @@ def _succ_ids(lane) -> list[str]:
     return out
 
 
-def net_segments(net) -> tuple[dict, dict]:
+def net_segments(net, cluster_m: float = CLUSTER_M) -> tuple[dict, dict]:
     """({lane id: Segment} of every lane passenger cars may use, {connector lane id:
     junction cluster id}) (module doc)."""
-    cluster = _clusters(net)
+    cluster = _clusters(net, cluster_m)
     segs, box_of = {}, {}
     for edge in net.getEdges(withInternal=True):
         fn = edge.getFunction()
@@ -104,13 +108,14 @@ def main_junction(box_of: dict) -> str:
     return max(sorted(count), key=count.get)
 
 
-def net_gt(path_or_net, junction: str | None = None, *, arm_length: float = 60.0
-           ) -> tuple[LaneGraphGT, dict, str]:
+def net_gt(path_or_net, junction: str | None = None, *, arm_length: float = 60.0,
+           cluster_m: float = CLUSTER_M) -> tuple[LaneGraphGT, dict, str]:
     """(ground truth, segments, junction cluster id) of a net's junction (default: the
-    main one; a node id names its cluster)."""
+    main one; a node id names its cluster; ``cluster_m``: module doc)."""
     net = read_net(path_or_net) if isinstance(path_or_net, (str, Path)) else path_or_net
-    segs, box_of = net_segments(net)
-    junction = main_junction(box_of) if junction is None else _clusters(net).get(junction, junction)
+    segs, box_of = net_segments(net, cluster_m)
+    junction = (main_junction(box_of) if junction is None
+                else _clusters(net, cluster_m).get(junction, junction))
     box = [k for k, j in box_of.items() if j == junction]
     return gt_from_lane_graph(segs, box, arm_length=arm_length), segs, junction
 

@@ -68,6 +68,23 @@ def test_some_traffic_and_a_floor(case):
     assert 1 in labels
 
 
+def test_neighbouring_junction_is_not_part_of_the_truth(tmp_path):
+    """Seed 5 draws a neighbour 34 m out on arm 4, with < 25 m of road between the boxes:
+    the truth keeps the junction's own six arms, the neighbour's side road is no arm."""
+    sc = sumo_scenario(5, GEN, workdir=tmp_path)
+    assert sc.info['neighbour'] and sc.info['junction'] == 'C'
+    assert len(sc.gt.arms) == sc.info['arms'] == 6
+    net = read_net(tmp_path / 'net.net.xml')
+    own, _, _ = net_gt(net, 'C', cluster_m=0.0)
+    merged, _, _ = net_gt(net, 'C')                     # edge-length clustering (inD rings)
+
+    def boxes(gt):
+        return {seg.split('_')[0] for ids in gt.segments_of.values() for seg in ids
+                if seg.startswith(':')}
+    assert ':N4' in boxes(merged) and ':N4' not in boxes(own)
+    assert max(own.stop) < 30.0 < max(merged.stop)
+
+
 @pytest.mark.parametrize('k', [1, 2, 3, 4])
 def test_ind_networks_give_a_junction(k):
     net = realdata_dir() / 'ind_sumo' / f'inD_{k}.net.xml'
