@@ -71,6 +71,8 @@ class Arm:
     confidence: float = 1.0
     support: float = 0.0      # vehicle passages that the arm explains (beyond the paper)
     offset: float = 0.0       # axis offset along ``normal`` [m] (beyond the paper)
+    bend: float = 0.0         # the axis turns by this [rad, left +] ... (beyond the paper)
+    bend_at: float = 0.0      # ... this far out along it [m] (topology/arm_bend.py)
 
     @property
     def direction(self) -> np.ndarray:
@@ -117,7 +119,8 @@ class Intersection:
                 {'angle_deg': math.degrees(float(wrap_angle(a.angle))), 'gap_m': float(a.gap),
                  'lanes_in': int(a.lanes_in), 'lanes_out': int(a.lanes_out),
                  'lane_width_m': float(a.lane_width), 'confidence': float(a.confidence),
-                 'support': float(a.support), 'offset_m': float(a.offset)}
+                 'support': float(a.support), 'offset_m': float(a.offset),
+                 'bend_deg': math.degrees(float(a.bend)), 'bend_at_m': float(a.bend_at)}
                 for a in self.arms
             ],
         }
@@ -127,7 +130,9 @@ class Intersection:
         arms = [Arm(angle=math.radians(a['angle_deg']), gap=a.get('gap_m', 0.0),
                     lanes_in=int(a['lanes_in']), lanes_out=int(a['lanes_out']),
                     lane_width=a.get('lane_width_m', 3.5), confidence=a.get('confidence', 1.0),
-                    support=float(a.get('support', 0.0)), offset=float(a.get('offset_m', 0.0)))
+                    support=float(a.get('support', 0.0)), offset=float(a.get('offset_m', 0.0)),
+                    bend=math.radians(float(a.get('bend_deg', 0.0))),
+                    bend_at=float(a.get('bend_at_m', 0.0)))
                 for a in d['arms']]
         return cls(center=np.asarray(d['center'], float), arms=arms,
                    traffic_side=int(d.get('traffic_side', 1)))

@@ -19,7 +19,9 @@ from ..ranges import check_labels, check_range
 from .prior import ARM_COUNT_PRIOR, LANE_COUNT_PRIOR, arm_log_const, count_log_table
 from .arm_offset import offset_log_const
 from .refit import log_floor_table
-from .state import (MAXA, NPARAM, P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT, P_C_SHIFT, P_C_WIDTH, P_OFF_LAPLACE,
+from .state import (MAXA, NPARAM, P_BEND_MAX, P_BEND_S_MAX, P_BEND_S_MIN, P_BEND_S_STEP,
+                    P_BEND_SCALE, P_BEND_STEP, P_C_ARM, P_C_GAP, P_C_LANE, P_C_OFFSET,
+                    P_C_ROT, P_C_SHIFT, P_C_WIDTH, P_OFF_LAPLACE,
                     P_D2_CUT, P_OFF_MAX, P_OFF_SIGMA, P_OFF_STEP,
                     P_FINE_P, P_FINE_SCALE, P_FLOOR, P_FOCUS, P_FOCUS_P, P_GAP_MAX,
                     P_GAP_STEP, P_LANE_NORM, P_LANE_SUM, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
@@ -40,12 +42,16 @@ RANGES = {
                 'at lane_width)'),
     'p_offset': ('[0, 1]', 'probability of the arm-axis offset move (beyond the paper, '
                  'arm_offset.py; only when arm_offset_max > 0)'),
+    'p_bend': ('[0, 1]', 'probability of the arm-bend move (beyond the paper, arm_bend.py; only '
+               'when arm_bend_max_deg > 0)'),
     # move ranges (Algorithm 1)
     'rotate_max_deg': ('(0, 180]', 'largest rotation of an arm [deg]'),
     'shift_max': ('(0, 100]', 'largest shift of the center [m]'),
     'gap_step': ('(0, 20]', 'largest change of a median gap [m]'),
     'width_step': ('(0, 2]', 'largest change of a lane width [m]'),
     'offset_step': ('(0, 10]', 'largest change of an arm-axis offset [m]'),
+    'bend_step_deg': ('(0, 90]', 'largest change of an arm bend [deg]'),
+    'bend_at_step': ('(0, 100]', 'largest change of the place of an arm bend [m]'),
     'fine_step_prob': ('[0, 1]', 'probability that a continuous move uses the fine range'),
     'fine_step_scale': ('(0, 1]', 'fine range as a share of the move range'),
     'split_span_deg': ('[0, 180]', "add-arm 'split': offset U[min_sep, min_sep + this] from an "
@@ -61,10 +67,16 @@ RANGES = {
                        '(0: arms are rays from the center, paper §II-B) [m]'),
     'arm_offset_sigma': ('(0, 30]', 'sigma (normal) or scale (Laplace) of the prior of an arm-axis '
                          'offset [m]'),
-    'arm_offset_tracks_only': (None, 'the arm-axis offset only for windows with tracked objects '
+    'arm_offset_tracks_only': (None, 'the arm-axis offset and bend only for windows with tracked objects '
                                '(radar / heading voxels are too coarse to place it)'),
     'arm_offset_prior': (None, "'normal' or 'laplace': the prior of an arm-axis offset "
                          '(arm_offset.py)'),
+    'arm_bend_max_deg': ('[0, 90]', 'largest bend of an arm axis (0: straight arms, paper §II-B; '
+                         'arm_bend.py) [deg]'),
+    'arm_bend_scale_deg': ('(0, 90]', 'scale of the Laplace prior of an arm bend [deg]'),
+    'arm_bend_at_min': ('[0, arm_bend_at_max)', 'nearest place of an arm bend along its axis [m]'),
+    'arm_bend_at_max': ('(arm_bend_at_min, 500]', 'farthest place of an arm bend along its axis '
+                        '[m]'),
     'lane_width': ('[lane_width_min, lane_width_max]', 'lane width of a new arm, and of every '
                    'arm when p_width = 0 [m]'),
     'lane_width_min': ('[1, lane_width_max)', 'narrowest lane [m]'),
@@ -75,6 +87,12 @@ RANGES = {
     'lane_count_prior': (None, 'P(lanes per direction = i), i = 0..len-1'),
     # likelihood (§II-C2)
     'sigma_track': ('[0.01, 20]', 'lateral sigma of a trajectory part\'s mean point [m]'),
+    'sigma_track_per_m': ('[0, 1]', 'lateral sigma of a trajectory part grows by this much per metre '
+                          'its mean point lies from the center, hypot(sigma, k r): a curved '
+                          'approach leaves a straight arm ray by more the farther out (beyond '
+                          'the paper) [m/m]'),
+    'sigma_track_grow_from': ('[0, 200]', 'distance from the center where sigma_track_per_m starts '
+                              'to count (r above it) [m]'),
     'sigma_track_weak': ('[0.01, 20]', 'lateral sigma of a trajectory part of a weak_labels road '
                          'user (cyclist, pedestrian: not at a lane center) [m]'),
     'weak_labels': (None, 'Autoware classification labels whose tracks count as traffic of an '
@@ -118,6 +136,8 @@ RANGES = {
     'part_outside': ('[0, 100]', 'trajectory parts: only their rows beyond this distance from the '
                      'center, from the far end, and it replaces min_center_dist for them (0: the '
                      'whole part, paper §II-A; preprocess.split_tracks) [m]'),
+    'part_piece_m': ('[0, 200]', 'trajectory parts: one mean per this many metres driven, each '
+                     'weighted by its share of the part (0: one mean per part, paper §II-A) [m]'),
     'bend_min_deg': ('[0, 90]', 'straighten an arm direction whose traffic turns by at least this '
                      'along the arm before the parts are reduced (0: off, straight arms, paper '
                      '§II-B; bend.py) [deg]'),
@@ -179,12 +199,15 @@ class TopologyConfig:
     p_lane: float = 0.15
     p_width: float = 0.10
     p_offset: float = 0.10
+    p_bend: float = 0.10
     # move ranges (Algorithm 1)
     rotate_max_deg: float = 6.0
     shift_max: float = 6.0
     gap_step: float = 1.8
     width_step: float = 0.25
     offset_step: float = 1.5
+    bend_step_deg: float = 6.0
+    bend_at_step: float = 10.0
     fine_step_prob: float = 0.5
     fine_step_scale: float = 0.1
     split_span_deg: float = 60.0
@@ -198,6 +221,10 @@ class TopologyConfig:
     arm_offset_max: float = 6.0
     arm_offset_sigma: float = 1.0
     arm_offset_prior: str = 'laplace'
+    arm_bend_max_deg: float = 0.0
+    arm_bend_scale_deg: float = 10.0
+    arm_bend_at_min: float = 5.0
+    arm_bend_at_max: float = 60.0
     arm_offset_tracks_only: bool = True
     lane_width: float = 3.5
     lane_width_min: float = 2.75
@@ -209,6 +236,8 @@ class TopologyConfig:
     # likelihood
     sigma_track: float = 0.8
     sigma_track_weak: float = 4.0
+    sigma_track_per_m: float = 0.0
+    sigma_track_grow_from: float = 0.0
     weak_labels: tuple = (6, 7)
     sigma_point: float = 1.2
     sigma_angle_deg: float = 5.0
@@ -240,6 +269,7 @@ class TopologyConfig:
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0
     part_outside: float = 12.0
+    part_piece_m: float = 0.0
     bend_min_deg: float = 0.0
     bend_bin: float = 5.0
     max_center_dist: float = math.inf
@@ -302,6 +332,11 @@ class TopologyConfig:
         return self.arm_offset_max > 0 and self.p_offset > 0
 
     @property
+    def bend_on(self) -> bool:
+        """Do arms carry a bend (:mod:`.arm_bend`)?"""
+        return self.arm_bend_max_deg > 0 and self.p_bend > 0
+
+    @property
     def sample_width(self) -> bool:
         """Is the lane width sampled (width move on), or fixed at ``lane_width``?"""
         return self.p_width > 0
@@ -319,6 +354,8 @@ class TopologyConfig:
             p[3:5] = 0.0
         if not self.offset_on:
             p[6] = 0.0
+        if not self.bend_on:
+            p[7] = 0.0
         cum = np.cumsum(p / p.sum())
         P[P_MIN_SEP] = math.radians(self.min_sep_deg)
         P[P_MIN_ARMS], P[P_MAX_ARMS] = self.min_arms, self.max_arms
@@ -330,13 +367,21 @@ class TopologyConfig:
         P[P_GAP_STEP] = self.gap_step
         P[P_W_STEP] = self.width_step
         P[P_SPLIT_SPAN] = math.radians(self.split_span_deg)
-        P[[P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE, P_C_WIDTH]] = cum[:6]
-        if p[6] == 0.0:      # exactly 1: the offset move is never picked (cumsum may round)
-            P[P_C_WIDTH] = 1.0
+        P[[P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE, P_C_WIDTH, P_C_OFFSET]] = cum[:7]
+        # exactly 1 where the later moves are never picked (cumsum may round)
+        if p[7] == 0.0:
+            P[P_C_OFFSET] = 1.0
+            if p[6] == 0.0:
+                P[P_C_WIDTH] = 1.0
         P[P_OFF_MAX] = self.arm_offset_max if self.offset_on else 0.0
         P[P_OFF_STEP] = self.offset_step
         P[P_OFF_SIGMA] = self.arm_offset_sigma
         P[P_OFF_LAPLACE] = float(self.arm_offset_prior == 'laplace')
+        P[P_BEND_MAX] = math.radians(self.arm_bend_max_deg) if self.bend_on else 0.0
+        P[P_BEND_STEP] = math.radians(self.bend_step_deg)
+        P[P_BEND_SCALE] = math.radians(self.arm_bend_scale_deg)
+        P[P_BEND_S_MIN], P[P_BEND_S_MAX] = self.arm_bend_at_min, self.arm_bend_at_max
+        P[P_BEND_S_STEP] = self.bend_at_step
         P[P_FLOOR] = self.clutter_floor
         P[P_TRAFFIC] = self.traffic_side
         P[P_D2_CUT] = self.cut_sigma2
@@ -350,7 +395,7 @@ class TopologyConfig:
         return P
 
 
-_MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width', 'p_offset')
+_MOVE_P = ('p_rotate', 'p_shift', 'p_gap', 'p_arm', 'p_lane', 'p_width', 'p_offset', 'p_bend')
 _FLAGS = ('lane_sum', 'straight_run', 'keep_unknown_direction', 'trim_longest',
           'arm_offset_tracks_only')
 
@@ -363,12 +408,13 @@ def _check_flags(cfg) -> None:
 
 #: The parameters preprocessing (preprocess.py, voxels.py, init.py) reads.
 PREPROCESS_FIELDS = (
-    'sigma_track', 'sigma_track_weak', 'weak_labels', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
+    'sigma_track', 'sigma_track_weak', 'sigma_track_per_m', 'sigma_track_grow_from', 'weak_labels', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
     'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
     'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
-    'track_radius', 'trim_longest', 'arm_reach', 'part_outside', 'bend_min_deg', 'bend_bin')
+    'track_radius', 'trim_longest', 'arm_reach', 'part_outside', 'part_piece_m', 'bend_min_deg',
+    'bend_bin')
 
 
 def _preprocess_validate(self) -> 'PreprocessConfig':
@@ -412,6 +458,14 @@ class Tables:
         if cfg.offset_on:
             self.arm_const += offset_log_const(cfg.arm_offset_sigma, cfg.arm_offset_max,
                                                cfg.arm_offset_prior == 'laplace')
+        #: the bend grid of :func:`.refit.refit_bend` (empty when the bend is off)
+        self.bends, self.bend_ats = np.zeros(0), np.zeros(0)
+        if cfg.bend_on:
+            mb = math.radians(cfg.arm_bend_max_deg)
+            nb = int(math.ceil(cfg.arm_bend_max_deg / 2.5))
+            self.bends = np.array([b for b in np.linspace(-mb, mb, 2 * nb + 1) if b != 0.0])
+            self.bend_ats = np.linspace(cfg.arm_bend_at_min, cfg.arm_bend_at_max, int(math.ceil(
+                (cfg.arm_bend_at_max - cfg.arm_bend_at_min) / 5.0)) + 1)
         self.log_floor = log_floor_table(
             cfg.clutter_floor, cfg.cut_sigma2 + cfg.lane_norm * math.log(cfg.max_lanes) + 1.0)
 

@@ -35,7 +35,7 @@ from .mcmc import Posterior, acceptance_rates, new_work, temperatures
 from .moves import MOVE_NAMES
 from .preprocess import preprocess, radar_rows
 from .refit import refit_chain
-from .state import CX, CY, HDR, MAXA, OFF, STRIDE, Chain, arm_angles, pack_state, unpack_state
+from .state import BEND, CX, CY, HDR, MAXA, OFF, STRIDE, Chain, arm_angles, pack_state, unpack_state
 from .support import reported
 
 __all__ = ['TopologyEstimator']
@@ -59,8 +59,9 @@ class TopologyEstimator:
         self._tables_all = Tables(self.cfg)
         #: the tables without the arm-axis offset, for windows without tracked objects
         #: when ``arm_offset_tracks_only`` (:mod:`.arm_offset`)
-        self._tables_plain = (Tables(replace(self.cfg, arm_offset_max=0.0))
-                              if self.cfg.offset_on and self.cfg.arm_offset_tracks_only
+        self._tables_plain = (Tables(replace(self.cfg, arm_offset_max=0.0, arm_bend_max_deg=0.0))
+                              if ((self.cfg.offset_on or self.cfg.bend_on)
+                                  and self.cfg.arm_offset_tracks_only)
                               else self._tables_all)
         self._pcfg = self.cfg.preprocess_config()
         self.reset()
@@ -254,6 +255,7 @@ class TopologyEstimator:
         for c in self._chains:
             for S in (c.S, c.best_S):
                 S[HDR + OFF:HDR + MAXA * STRIDE:STRIDE] = 0.0
+                S[HDR + BEND:HDR + MAXA * STRIDE:STRIDE] = 0.0
 
     @property
     def _tables(self) -> Tables:

@@ -14,6 +14,8 @@ paper's formula, each for a reason:
   density, so false detections and turning vehicles inside the intersection box cannot
   dominate. The density is unnormalised (peak 1) so ``floor`` reads as "an outlier is as
   likely as an inlier at ``sqrt(-2 ln floor)`` sigmas".
+* an arm's axis may bend once (beyond the paper, :mod:`.arm_bend`): beyond the kink's
+  bisector an observation is measured in the outer piece's frame.
 * lanes are rays from the center (paper §II-B): an observation behind the ray start
   (``s < 0`` along the arm) is scored with its Euclidean distance to the start, so one arm
   cannot explain traffic on the opposite side of the intersection.
@@ -40,8 +42,9 @@ import operator
 import numpy as np
 from numba import njit
 
-from .state import (ANG, GAP, HDR, MAXA, NIN, NOUT, P_D2_CUT, P_FLOOR, P_LANE_NORM,
-                    P_LANE_SUM, P_TRAFFIC, STRIDE, WID, arm_origin)
+from .arm_bend import unbend
+from .state import (ANG, BEND, BENDAT, GAP, HDR, MAXA, NIN, NOUT, P_D2_CUT, P_FLOOR,
+                    P_LANE_NORM, P_LANE_SUM, P_TRAFFIC, STRIDE, WID, arm_origin)
 
 __all__ = ['ObservationSet', 'log_likelihood', 'arm_frame', 'arm_column', 'arm_column_into',
            'all_columns', 'all_columns_into', 'combine', 'full_loglik']
@@ -121,16 +124,20 @@ def log_likelihood(S: np.ndarray, obs: ObservationSet, P: np.ndarray) -> float:
 
 
 @njit(cache=True, fastmath=True, inline='always')
-def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa):
-    """Observation ``i`` relative to an arm through (cx, cy) with direction (ux, uy):
-    along-arm ``s``, lateral ``t``, direction ``d`` (+1 entering) and angle energy ``e``.
-    With an orientation the direction is arm-local (entering iff <o, u_a> < 0) and
-    ``e = 2(1 - |cos|) / sigma^2`` (von Mises ~ angle^2); without, the Doppler class, and
-    for an unknown class (0) the side of the median decides."""
+def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa, at, cb, sb):
+    """Observation ``i`` relative to an arm through (cx, cy) with direction (ux, uy),
+    bent by ``beta`` (``cb, sb = cos, sin``; ``sb = 0``: straight) at ``at``
+    (:func:`.arm_bend.unbend`): along-arm ``s``, lateral ``t``, direction ``d`` (+1
+    entering) and angle energy ``e``. With an orientation the direction is arm-local
+    (entering iff <o, u_a> < 0) and ``e = 2(1 - |cos|) / sigma^2`` (von Mises ~ angle^2);
+    without, the Doppler class, and for an unknown class (0) the side of the median
+    decides."""
     px = ox[i] - cx
     py = oy[i] - cy
     s = px * ux + py * uy
     t = py * ux - px * uy
+    if sb != 0.0:
+        return _bent_frame(i, s, t, ux, uy, ts, hx, hy, has_o, dcls, isa, at, cb, sb)
     e = 0.0
     if has_o[i]:
         c = hx[i] * ux + hy[i] * uy
@@ -144,10 +151,26 @@ def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa):
 
 
 @njit(cache=True, fastmath=True, inline='always')
+def _bent_frame(i, s, t, ux, uy, ts, hx, hy, has_o, dcls, isa, at, cb, sb):
+    """:func:`arm_frame` of observation ``i`` (at ``s``, ``t`` on the straight axis) on
+    an arm that bends (kept apart so that the straight arm's code stays as it was)."""
+    s, t, c = unbend(s, t, hx[i] * ux + hy[i] * uy, hy[i] * ux - hx[i] * uy, at, cb, sb)
+    e = 0.0
+    if has_o[i]:
+        d = 1.0 if c < 0.0 else -1.0
+        e = isa[i] * 2.0 * (1.0 - abs(c))
+    else:
+        d = dcls[i]
+        if d == 0.0:
+            d = 1.0 if t * ts > 0.0 else -1.0
+    return s, t, d, e
+
+
+@njit(cache=True, fastmath=True, inline='always')
 def _arm_geometry(S, k, P):
     """Arm ``k`` of state ``S`` for the likelihood: axis start (the center, moved by the
     arm's axis offset), unit direction, half gap, lane counts and width, traffic side,
-    lane-count normalisations (entering, leaving)."""
+    lane-count normalisations (entering, leaving), the bend's place and cos / sin."""
     i0 = HDR + k * STRIDE
     a = S[i0 + ANG]
     nin = S[i0 + NIN]
@@ -155,8 +178,10 @@ def _arm_geometry(S, k, P):
     ux = math.cos(a)
     uy = math.sin(a)
     cx, cy = arm_origin(S, k, ux, uy)
+    b = S[i0 + BEND]
     return (cx, cy, ux, uy, 0.5 * S[i0 + GAP], nin, nout, S[i0 + WID],
-            P[P_TRAFFIC], nin ** -P[P_LANE_NORM], nout ** -P[P_LANE_NORM])
+            P[P_TRAFFIC], nin ** -P[P_LANE_NORM], nout ** -P[P_LANE_NORM],
+            S[i0 + BENDAT], math.cos(b), math.sin(b))
 
 
 @njit(cache=True, fastmath=True)
@@ -176,17 +201,12 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, np.empty(n))
 
 
-@njit(cache=True, fastmath=True)
-def arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy):
-    """:func:`arm_column` with the caller's scratch ``energy`` (one per observation): no
-    allocation, for the sampler's loop. Two passes: the energy of the closest lane and the
-    lane-count normalisation (branch-free, vectorises); the exponential only below the cut."""
-    if P[P_LANE_SUM] > 0.0:
-        _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out)
-        return
-    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)
-    n = ox.shape[0]
-    for i in range(n):
+@njit(cache=True, fastmath=True, inline='always')
+def _straight_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out,
+                       ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy):
+    """First pass of :func:`arm_column_into` on a straight arm: per observation the energy
+    of its closest lane (``energy``) and the lane-count normalisation (``out``)."""
+    for i in range(ox.shape[0]):
         px = ox[i] - cx
         py = oy[i] - cy
         s = px * ux + py * uy
@@ -199,9 +219,42 @@ def arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy)
         nl = nin if d > 0.0 else nout
         q = d * ts * t - hg
         dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
-        sb = min(s, 0.0)
-        energy[i] = e + isp[i] * (sb * sb + dl * dl)
+        sn = min(s, 0.0)
+        energy[i] = e + isp[i] * (sn * sn + dl * dl)
         out[i] = inv_n_in if d > 0.0 else inv_n_out
+
+
+@njit(cache=True, fastmath=True, inline='always')
+def _bent_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out, at, cb, sb,
+                   ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy):
+    """:func:`_straight_energies` on an arm that bends (:func:`.arm_bend.unbend`)."""
+    for i in range(ox.shape[0]):
+        s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa,
+                               at, cb, sb)
+        nl = nin if d > 0.0 else nout
+        q = d * ts * t - hg
+        dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
+        sn = min(s, 0.0)
+        energy[i] = e + isp[i] * (sn * sn + dl * dl)
+        out[i] = inv_n_in if d > 0.0 else inv_n_out
+
+
+@njit(cache=True, fastmath=True)
+def arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy):
+    """:func:`arm_column` with the caller's scratch ``energy`` (one per observation): no
+    allocation, for the sampler's loop. Two passes: the energy of the closest lane and the
+    lane-count normalisation (branch-free, vectorises); the exponential only below the cut."""
+    if P[P_LANE_SUM] > 0.0:
+        _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out)
+        return
+    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out, at, cb, sb = _arm_geometry(S, k, P)
+    if sb != 0.0:
+        _bent_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out, at, cb, sb,
+                       ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy)
+    else:
+        _straight_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out,
+                           ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy)
+    n = ox.shape[0]
     cut = P[P_D2_CUT]
     for i in range(n):
         out[i] = out[i] * math.exp(-energy[i]) if energy[i] < cut else 0.0
@@ -210,10 +263,11 @@ def arm_column_into(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy)
 @njit(cache=True, fastmath=True)
 def _arm_column_sum(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
     """:func:`arm_column` with the sum over the lanes of that direction (``P_LANE_SUM``)."""
-    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out = _arm_geometry(S, k, P)
+    cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out, at, cb, sb = _arm_geometry(S, k, P)
     cut = P[P_D2_CUT]
     for i in range(ox.shape[0]):
-        s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa)
+        s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa,
+                               at, cb, sb)
         if e >= cut:
             out[i] = 0.0
             continue

@@ -17,6 +17,7 @@ from numba import njit
 
 from .likelihood import ObservationSet, all_columns_into, arm_column_into, full_loglik
 from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
+from .arm_bend import bend_log_prior
 from .arm_offset import offset_log_prior
 from .prior import log_prior
 from .state import MAXA, P_FLOOR, Chain
@@ -71,7 +72,7 @@ def acceptance_rates(stats: np.ndarray) -> dict:
 def state_log_prior(S, P, logPA, logPn, arm_const):
     """log P(I) of state ``S``: the paper's count and uniform priors (§II-C1,
     :func:`.prior.log_prior`) plus the arm-axis offsets' (:mod:`.arm_offset`; 0 when off)."""
-    return log_prior(S, logPA, logPn, arm_const) + offset_log_prior(S, P)
+    return log_prior(S, logPA, logPn, arm_const) + offset_log_prior(S, P) + bend_log_prior(S, P)
 
 
 class Posterior:

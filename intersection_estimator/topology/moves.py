@@ -31,6 +31,10 @@ width         0.09   (beyond the paper) lane width of one arm by U[-step, step];
 offset        0      (beyond the paper, :mod:`.arm_offset`; when on) axis offset of one arm
                      by U[-step, step], ``|offset| <= max``; symmetric. Add-arm then also
                      draws the new arm's offset from its prior normal.
+bend          0      (beyond the paper, :mod:`.arm_bend`; when on) one arm's bend angle
+                     (1/2) or its place along the axis (1/2) by U[-step, step], within
+                     their bounds; symmetric. Add-arm then also draws the new arm's bend
+                     from its prior.
 ============  =====  ====================================================================
 
 Continuous moves use ``fine_step_scale`` x their range with probability
@@ -47,21 +51,25 @@ import math
 import numpy as np
 from numba import njit
 
+from .arm_bend import bend_logq, bend_ok, draw_bend
 from .arm_offset import draw_offset, offset_logq, offset_ok
-from .state import (ANG, GAP, HDR, LOG_TWO_PI, MAXA, NEG_INF, NIN, NOUT, OFF, P_C_ARM, P_C_GAP,
-                    P_C_LANE, P_C_ROT, P_C_SHIFT, P_C_WIDTH, P_FINE_P, P_FINE_SCALE, P_FOCUS,
+from .state import (ANG, BEND, BENDAT, GAP, HDR, LOG_TWO_PI, MAXA, NEG_INF, NIN, NOUT, OFF,
+                    P_BEND_MAX, P_BEND_S_MAX, P_BEND_S_MIN, P_BEND_S_STEP, P_BEND_STEP,
+                    P_C_ARM, P_C_GAP, P_C_LANE, P_C_OFFSET, P_C_ROT, P_C_SHIFT, P_C_WIDTH,
+                    P_FINE_P, P_FINE_SCALE, P_FOCUS,
                     P_FOCUS_P, P_OFF_MAX, P_OFF_STEP,
                     P_GAP_MAX, P_GAP_STEP, P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS, P_MIN_LANES,
                     P_MIN_SEP, P_ROT, P_SAMPLE_W, P_SHIFT, P_SPLIT_SPAN, P_W_DEFAULT, P_W_MAX,
                     P_W_MIN, P_W_STEP, STRIDE, TWO_PI, WID, largest_gap, separation_ok, wrap)
 
 __all__ = ['MOVE_NAMES', 'ROTATE', 'SHIFT', 'CHANGE_GAP', 'ADD_ARM', 'REMOVE_ARM', 'LANE',
-           'WIDTH', 'OFFSET', 'propose', 'remove_arm_at', 'move_rotate', 'move_shift', 'move_gap',
-           'move_width', 'move_offset', 'move_add_arm', 'move_remove_arm', 'move_lane',
+           'WIDTH', 'OFFSET', 'BEND_MOVE', 'propose', 'remove_arm_at', 'move_rotate', 'move_shift',
+           'move_gap', 'move_width', 'move_offset', 'move_bend', 'move_add_arm', 'move_remove_arm', 'move_lane',
            'add_arm_angle_logdensity', 'new_arm_logdensity']
 
-ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH, OFFSET = range(8)
-MOVE_NAMES = ('rotate', 'shift', 'gap', 'add_arm', 'remove_arm', 'lane', 'width', 'offset')
+ROTATE, SHIFT, CHANGE_GAP, ADD_ARM, REMOVE_ARM, LANE, WIDTH, OFFSET, BEND_MOVE = range(9)
+MOVE_NAMES = ('rotate', 'shift', 'gap', 'add_arm', 'remove_arm', 'lane', 'width', 'offset',
+              'bend')
 
 
 @njit(cache=True)
@@ -114,6 +122,7 @@ def new_arm_logdensity(S2, k, logqn, P):
     """log density of arm ``k``'s parameters other than its angle under add-arm."""
     lq = logqn[int(S2[HDR + k * STRIDE + NIN])] + logqn[int(S2[HDR + k * STRIDE + NOUT])]
     lq += offset_logq(S2[HDR + k * STRIDE + OFF], P)
+    lq += bend_logq(S2[HDR + k * STRIDE + BEND], P)
     lq -= math.log(P[P_GAP_MAX])
     if P[P_SAMPLE_W] > 0.0:
         lq -= math.log(P[P_W_MAX] - P[P_W_MIN])
@@ -189,6 +198,15 @@ def move_offset(S, S2, P):
 
 
 @njit(cache=True)
+def move_bend(S, S2, P):
+    """Change the bend angle or the bend's place of an arm (beyond the paper,
+    :mod:`.arm_bend`)."""
+    if np.random.random() < 0.5:
+        return _perturb_arm(S, S2, P, BEND, P[P_BEND_STEP], -P[P_BEND_MAX], P[P_BEND_MAX])
+    return _perturb_arm(S, S2, P, BENDAT, P[P_BEND_S_STEP], P[P_BEND_S_MIN], P[P_BEND_S_MAX])
+
+
+@njit(cache=True)
 def move_add_arm(S, S2, P, logqn, cumqn):
     """Add an arm (largest gap or next to an arm); reverse: remove that arm."""
     n = int(S[2])
@@ -218,8 +236,10 @@ def move_add_arm(S, S2, P, logqn, cumqn):
     else:
         S2[i + WID] = P[P_W_DEFAULT]
     S2[i + OFF] = draw_offset(P)
+    S2[i + BEND], S2[i + BENDAT] = draw_bend(P)
     S2[2] = n + 1
-    if not separation_ok(S2, n, ms) or not offset_ok(S2[i + OFF], P):
+    if (not separation_ok(S2, n, ms) or not offset_ok(S2[i + OFF], P)
+            or not bend_ok(S2[i + BEND], S2[i + BENDAT], P)):
         return False, 0.0, n
     lq_fwd = add_arm_angle_logdensity(S, phi, P) + new_arm_logdensity(S2, n, logqn, P)
     lq_rev = -math.log(n + 1.0)
@@ -322,5 +342,8 @@ def propose(S, S2, P, logqn, cumqn):
     if w < P[P_C_WIDTH]:
         ok, lq, k = move_width(S, S2, P)
         return ok, lq, WIDTH, k
-    ok, lq, k = move_offset(S, S2, P)
-    return ok, lq, OFFSET, k
+    if w < P[P_C_OFFSET]:
+        ok, lq, k = move_offset(S, S2, P)
+        return ok, lq, OFFSET, k
+    ok, lq, k = move_bend(S, S2, P)
+    return ok, lq, BEND_MOVE, k

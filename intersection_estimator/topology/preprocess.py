@@ -90,30 +90,37 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
                                  reach, cfg.bend_bin, cfg.bend_min_deg)
     o = split_tracks(x, y, hd, starts, ends, float(c[0]), float(c[1]),
                      cfg.min_part_points, cfg.min_part_length, math.radians(cfg.trim_turn_deg), 5,
-                     bool(cfg.trim_longest), float(cfg.part_outside))
+                     bool(cfg.trim_longest), float(cfg.part_outside), float(cfg.part_piece_m))
     if len(o) == 0:
         return ObservationSet.empty()
     hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
     d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
-    obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, np.ones(len(o)),
-                         _part_sigma(track_label, o[:, 4].astype(np.int64), cfg),
-                         np.full(len(o), math.radians(cfg.sigma_angle_deg)), np.ones(len(o)))
+    obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, o[:, 5].copy(),
+                         _part_sigma(track_label, o[:, 4].astype(np.int64), cfg,
+                                     np.hypot(o[:, 0] - c[0], o[:, 1] - c[1])),
+                         np.full(len(o), math.radians(cfg.sigma_angle_deg)), o[:, 5].copy())
     # parts cut at part_outside: that radius is also their box radius
     return _drop_near_center(obs, c, cfg, far=False,
                              inner=cfg.part_outside if cfg.part_outside > 0 else None)
 
 
-def _part_sigma(track_label, part_track, cfg: PreprocessConfig) -> np.ndarray:
+def _part_sigma(track_label, part_track, cfg: PreprocessConfig, r) -> np.ndarray:
     """Orthogonal-distance sigma per trajectory part: ``sigma_track``, and
     ``sigma_track_weak`` for road users that do not keep to a lane's center
     (``weak_labels``, Autoware classification ids; by default bicycle 6 and pedestrian 7:
     a cyclist rides at the kerb side of its lane). Beyond the paper: such a part still
     shows that its arm exists and carries traffic, but its lateral position cannot ask for
-    a lane of its own."""
+    a lane of its own. With ``sigma_track_per_m`` = k the sigma is ``hypot(sigma, k r')``
+    for a part mean ``r' = r - sigma_track_grow_from`` metres beyond that radius (§II-B's lanes are straight rays; a
+    curved approach leaves its ray by more the farther out, so the parts near the box
+    place the lanes)."""
     sig = np.full(len(part_track), cfg.sigma_track)
     if cfg.weak_labels and len(part_track):
         weak = np.isin(track_label[part_track], np.asarray(cfg.weak_labels, np.int64))
         sig[weak] = cfg.sigma_track_weak
+    if cfg.sigma_track_per_m > 0:
+        beyond = np.maximum(np.asarray(r, float) - cfg.sigma_track_grow_from, 0.0)
+        sig = np.hypot(sig, cfg.sigma_track_per_m * beyond)
     return sig
 
 
@@ -374,7 +381,7 @@ def _far_portion(x, y, lo, hi, cx, cy, r2, entering):
 
 @njit(cache=True)
 def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, longest,
-                 outside=0.0):
+                 outside=0.0, piece=0.0):
     """Paper §II-A for tracked objects: split each trajectory at its point closest to the
     center ``(cx, cy)`` and reduce each part to its mean point and mean direction.
 
@@ -388,14 +395,16 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, long
     is first cut to its straight run from the far end (moving average of ``win`` heading
     deviations from the far-end direction below ``tol``): the turn inside the intersection
     box would bias the mean point and direction; with ``longest`` the longest straight run
-    of the part is kept instead of the first (:func:`straight_run`). Returns (mx, my, vx,
-    vy, trajectory index) per kept part.
+    of the part is kept instead of the first (:func:`straight_run`). With ``piece > 0``
+    (beyond the paper) the kept rows give one mean per ``piece`` metres driven instead of
+    one per part (:func:`_pieces`), each weighted by its share of the part. Returns (mx,
+    my, vx, vy, trajectory index, weight) per kept part or piece.
 
     Length (over 80 lines): one pass per trajectory (closest point, split, straight-run
     trim, means); helpers would need the same dozen loop-carried variables.
     """
     nt = starts.shape[0]
-    out = np.empty((2 * nt, 5))
+    out = np.empty((2 * nt + (x.shape[0] if piece > 0.0 else 0), 6))
     m = 0
     for t in range(nt):
         a = starts[t]
@@ -431,6 +440,9 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, long
             start, keep = 0, n
             if tol > 0.0:
                 start, keep = straight_run(h, first, step, n, tol, win, longest)
+            if piece > 0.0:
+                m = _pieces(x, y, h, first + step * start, step, keep, piece, t, out, m)
+                continue
             mx = 0.0
             my = 0.0
             vx = 0.0
@@ -446,5 +458,48 @@ def split_tracks(x, y, h, starts, ends, cx, cy, min_pts, min_len, tol, win, long
             out[m, 2] = vx
             out[m, 3] = vy
             out[m, 4] = t
+            out[m, 5] = 1.0
             m += 1
     return out[:m]
+
+
+@njit(cache=True)
+def _pieces(x, y, h, first, step, keep, piece, t, out, m):
+    """The ``keep`` rows from ``first`` (by ``step``) of a trajectory part cut into runs of
+    ``piece`` metres driven (a last run shorter than half a piece joins the one before):
+    per run its mean point, summed direction, trajectory ``t`` and weight = its metres /
+    the part's, written from ``out[m]``. Returns the next free row. A curved approach keeps
+    its shape (:mod:`.arm_bend` can then follow it) instead of one mean point beside it."""
+    total = 0.0
+    for q in range(1, keep):
+        i, j = first + step * q, first + step * (q - 1)
+        total += math.hypot(x[i] - x[j], y[i] - y[j])
+    n_runs = max(1, int(total / piece + 0.5))
+    m0 = m
+    run = 0
+    mx = my = vx = vy = 0.0
+    cnt = 0
+    done = 0.0
+    for q in range(keep):
+        i = first + step * q
+        if q > 0:
+            j = first + step * (q - 1)
+            done += math.hypot(x[i] - x[j], y[i] - y[j])
+        r = min(int(done / total * n_runs), n_runs - 1) if total > 0.0 else 0
+        if r != run and cnt > 0:
+            out[m, 0], out[m, 1], out[m, 2], out[m, 3], out[m, 4] = mx / cnt, my / cnt, vx, vy, t
+            m += 1
+            mx = my = vx = vy = 0.0
+            cnt = 0
+            run = r
+        mx += x[i]
+        my += y[i]
+        vx += math.cos(h[i])
+        vy += math.sin(h[i])
+        cnt += 1
+    if cnt > 0:
+        out[m, 0], out[m, 1], out[m, 2], out[m, 3], out[m, 4] = mx / cnt, my / cnt, vx, vy, t
+        m += 1
+    for k in range(m0, m):
+        out[k, 5] = 1.0 / (m - m0)
+    return m

@@ -8,7 +8,9 @@ State ``S`` (float64 vector, cheap to copy; one intersection ``I = (c, A)``):
 ``S[HDR + k*STRIDE + f]``   field ``f`` of arm slot ``k``: ``ANG`` angle [rad, wrapped
                             to [-pi, pi)], ``GAP`` median gap [m], ``NIN`` / ``NOUT``
                             entering / leaving lane count, ``WID`` lane width [m],
-                            ``OFF`` axis offset [m] (beyond the paper, below)
+                            ``OFF`` axis offset [m] (beyond the paper, below),
+                            ``BEND`` bend [rad] at ``BENDAT`` [m] out along the axis
+                            (beyond the paper, :mod:`.arm_bend`)
 ==========================  =========================================================
 
 The axis offset (beyond the paper; :mod:`.arm_offset`) moves an arm's axis sideways,
@@ -36,14 +38,14 @@ from numba import njit
 from ..model import Arm, Intersection, wrap_angle
 
 __all__ = ['MAXA', 'HDR', 'STRIDE', 'STATE_LEN', 'CX', 'CY', 'NARMS', 'ANG', 'GAP', 'NIN',
-           'NOUT', 'WID', 'OFF', 'NPARAM', 'arm_origin', 'Chain', 'pack_state', 'unpack_state',
+           'NOUT', 'WID', 'OFF', 'BEND', 'BENDAT', 'NPARAM', 'arm_origin', 'Chain', 'pack_state', 'unpack_state',
            'arm_rows', 'arm_angles', 'wrap', 'separation_ok', 'largest_gap']
 
 MAXA = 8                      # arm slots
 CX, CY, NARMS = 0, 1, 2       # header slots
 HDR = 3                       # header length
-STRIDE = 6                    # values per arm slot
-ANG, GAP, NIN, NOUT, WID, OFF = 0, 1, 2, 3, 4, 5
+STRIDE = 8                    # values per arm slot
+ANG, GAP, NIN, NOUT, WID, OFF, BEND, BENDAT = 0, 1, 2, 3, 4, 5, 6, 7
 STATE_LEN = HDR + STRIDE * MAXA
 
 # Kernel parameter slots (see the module docstring; units as in TopologyConfig).
@@ -52,8 +54,10 @@ STATE_LEN = HDR + STRIDE * MAXA
  P_C_ROT, P_C_SHIFT, P_C_GAP, P_C_ARM, P_C_LANE,
  P_FLOOR, P_TRAFFIC, P_D2_CUT, P_SAMPLE_W, P_W_DEFAULT,
  P_LANE_NORM, P_FINE_P, P_FINE_SCALE, P_LANE_SUM, P_FOCUS, P_FOCUS_P,
- P_C_WIDTH, P_OFF_MAX, P_OFF_STEP, P_OFF_SIGMA, P_OFF_LAPLACE) = range(34)
-NPARAM = 34
+ P_C_WIDTH, P_OFF_MAX, P_OFF_STEP, P_OFF_SIGMA, P_OFF_LAPLACE,
+ P_C_OFFSET, P_BEND_MAX, P_BEND_STEP, P_BEND_SCALE, P_BEND_S_MIN, P_BEND_S_MAX,
+ P_BEND_S_STEP) = range(41)
+NPARAM = 41
 
 TWO_PI = 2.0 * math.pi
 LOG_TWO_PI = math.log(TWO_PI)
@@ -70,7 +74,7 @@ def pack_state(inter: Intersection) -> np.ndarray:
     for k, a in enumerate(inter.arms):
         i = HDR + k * STRIDE
         S[i:i + STRIDE] = (float(wrap_angle(a.angle)), a.gap, a.lanes_in, a.lanes_out,
-                           a.lane_width, a.offset)
+                           a.lane_width, a.offset, a.bend, a.bend_at)
     return S
 
 
@@ -82,6 +86,7 @@ def unpack_state(S: np.ndarray, traffic_side: int = 1, confidence=None) -> Inter
         arms.append(Arm(angle=float(S[i + ANG]), gap=float(S[i + GAP]),
                         lanes_in=int(S[i + NIN]), lanes_out=int(S[i + NOUT]),
                         lane_width=float(S[i + WID]), offset=float(S[i + OFF]),
+                        bend=float(S[i + BEND]), bend_at=float(S[i + BENDAT]),
                         confidence=1.0 if confidence is None else float(confidence[k])))
     return Intersection(center=S[CX:CY + 1].copy(), arms=arms, traffic_side=traffic_side)
 

@@ -19,12 +19,21 @@ def log_likelihood_reference(S: np.ndarray, obs: ObservationSet, P: np.ndarray) 
     p = np.stack([obs.x - S[0], obs.y - S[1]], axis=1)
     best = np.zeros(len(obs))
     for k in range(n):
-        ang, gap, nin, nout, w, off = S[HDR + k * STRIDE: HDR + (k + 1) * STRIDE]
+        ang, gap, nin, nout, w, off, bend, at = S[HDR + k * STRIDE: HDR + (k + 1) * STRIDE]
         u = np.array([math.cos(ang), math.sin(ang)])
         nrm = np.array([-u[1], u[0]])
         s = p @ u
         t = p @ nrm - off        # lateral position from the arm's (offset) axis
-        dot = obs.hx * u[0] + obs.hy * u[1]
+        o = np.stack([obs.hx, obs.hy], axis=1)
+        dot = o @ u
+        if bend != 0.0:          # beyond the kink's bisector: the outer piece's frame
+            rot = np.array([[math.cos(bend), -math.sin(bend)], [math.sin(bend), math.cos(bend)]])
+            u2, n2 = rot @ u, rot @ nrm
+            q = p - (off * nrm + at * u)
+            out = q @ (u + u2) > 0
+            s = np.where(out, at + q @ u2, s)
+            t = np.where(out, q @ n2, t)
+            dot = np.where(out, o @ u2, dot)
         d_side = np.where(t * P[P_TRAFFIC] > 0, 1.0, -1.0)    # unknown direction (d == 0)
         d = np.where(obs.has_o, np.where(dot < 0, 1.0, -1.0), np.where(obs.d == 0, d_side, obs.d))
         ang2 = np.where(obs.has_o, 2.0 * (1.0 - np.abs(dot)), 0.0)    # von Mises

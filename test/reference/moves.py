@@ -9,11 +9,14 @@ import numpy as np
 from numba import njit
 
 from intersection_estimator.model import wrap_angle
-from intersection_estimator.topology.moves import (ADD_ARM, CHANGE_GAP, LANE, OFFSET, REMOVE_ARM,
-                                                   ROTATE, SHIFT, WIDTH, move_add_arm, move_gap,
-                                                   move_lane, move_offset, move_remove_arm,
-                                                   move_rotate, move_shift, move_width)
-from intersection_estimator.topology.state import (P_C_ARM, P_C_GAP, P_C_LANE, P_C_ROT,
+from intersection_estimator.topology.moves import (ADD_ARM, BEND_MOVE, CHANGE_GAP, LANE, OFFSET,
+                                                   REMOVE_ARM, ROTATE, SHIFT, WIDTH, move_add_arm,
+                                                   move_bend, move_gap, move_lane, move_offset,
+                                                   move_remove_arm, move_rotate, move_shift,
+                                                   move_width)
+from intersection_estimator.topology.state import (P_BEND_MAX, P_BEND_S_MAX, P_BEND_S_MIN,
+                                                   P_BEND_S_STEP, P_BEND_SCALE, P_BEND_STEP,
+                                                   P_C_ARM, P_C_GAP, P_C_LANE, P_C_OFFSET, P_C_ROT,
                                                    P_C_SHIFT, P_C_WIDTH, P_GAP_MAX, P_GAP_STEP,
                                                    P_MAX_ARMS, P_MAX_LANES, P_MIN_ARMS,
                                                    P_MIN_LANES, P_MIN_SEP, P_OFF_MAX,
@@ -41,8 +44,10 @@ def propose_kind(S, S2, P, logqn, cumqn, kind, seed):
         ok, lq, k = move_lane(S, S2, P)
     elif kind == WIDTH:
         ok, lq, k = move_width(S, S2, P)
-    else:
+    elif kind == OFFSET:
         ok, lq, k = move_offset(S, S2, P)
+    else:
+        ok, lq, k = move_bend(S, S2, P)
     return ok, lq, k
 
 
@@ -53,10 +58,12 @@ def is_valid(S: np.ndarray, P: np.ndarray) -> bool:
         return False
     A = arm_rows(S)
     for k in range(n):
-        ang, gap, nin, nout, w, off = A[k]
+        ang, gap, nin, nout, w, off, bend, at = A[k]
         if not (-math.pi <= ang < math.pi) or not (0.0 <= gap <= P[P_GAP_MAX]):
             return False
-        if abs(off) > P[P_OFF_MAX]:
+        if abs(off) > P[P_OFF_MAX] or abs(bend) > P[P_BEND_MAX]:
+            return False
+        if bend != 0.0 and not (P[P_BEND_S_MIN] <= at <= P[P_BEND_S_MAX]):
             return False
         for c in (nin, nout):
             if c != int(c) or not (P[P_MIN_LANES] <= c <= P[P_MAX_LANES]):
@@ -80,9 +87,9 @@ def propose_move(S: np.ndarray, kind: int, P: np.ndarray, logqn: np.ndarray,
 
 def _move_prob(P: np.ndarray, kind: int) -> float:
     cum = [0.0, P[P_C_ROT], P[P_C_SHIFT], P[P_C_GAP], P[P_C_ARM], P[P_C_LANE], P[P_C_WIDTH],
-           1.0]
+           P[P_C_OFFSET], 1.0]
     group = {ROTATE: 0, SHIFT: 1, CHANGE_GAP: 2, ADD_ARM: 3, REMOVE_ARM: 3,
-             LANE: 4, WIDTH: 5, OFFSET: 6}[kind]
+             LANE: 4, WIDTH: 5, OFFSET: 6, BEND_MOVE: 7}[kind]
     p = cum[group + 1] - cum[group]
     return p * (0.5 if kind in (ADD_ARM, REMOVE_ARM) else 1.0)
 
@@ -130,6 +137,9 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
         return math.log(pm / n / (2 * P[P_W_STEP]))
     if kind == OFFSET:
         return math.log(pm / n / (2 * P[P_OFF_STEP]))
+    if kind == BEND_MOVE:        # the angle or the place, 1/2 each
+        step = P[P_BEND_STEP] if b[:, 6].tolist() != a[:, 6].tolist() else P[P_BEND_S_STEP]
+        return math.log(0.5 * pm / n / (2 * step))
     if kind == LANE:
         nvar = 3 if P[P_SAMPLE_W] > 0 else 2
         return math.log(pm / n / (4.0 * nvar))
@@ -139,6 +149,10 @@ def proposal_log_density(S_from: np.ndarray, S_to: np.ndarray, kind: int, P: np.
         lq -= math.log(P[P_GAP_MAX])
         if P[P_SAMPLE_W] > 0:
             lq -= math.log(P[P_W_MAX] - P[P_W_MIN])
+        if P[P_BEND_MAX] > 0:      # bend from Laplace(0, scale), its place uniform
+            sc = P[P_BEND_SCALE]
+            lq += (-abs(new[6]) / sc - math.log(2 * sc)
+                   - math.log(P[P_BEND_S_MAX] - P[P_BEND_S_MIN]))
         if P[P_OFF_MAX] > 0 and P[P_OFF_LAPLACE] > 0:   # offset from Laplace(0, b)
             b = P[P_OFF_SIGMA]
             lq += -abs(new[5]) / b - math.log(2 * b)

@@ -14,9 +14,11 @@ CFG = TopologyConfig()
 
 
 @st.composite
-def states(draw, max_offset=0.0):
+def states(draw, max_offset=0.0, max_bend_deg=0.0):
     """Valid packed states: arm angles at least min_sep apart, bounds respected; arm-axis
-    offsets in ``[-max_offset, max_offset]`` (0 unless given)."""
+    offsets in ``[-max_offset, max_offset]`` and bends in ``[-max_bend_deg, max_bend_deg]``
+    at ``[arm_bend_at_min, arm_bend_at_max]`` (0 unless given)."""
+    mb = math.radians(max_bend_deg)
     ms = math.radians(CFG.min_sep_deg)
     n = draw(st.integers(CFG.min_arms, CFG.max_arms))
     slack = 2 * math.pi - n * ms
@@ -29,7 +31,10 @@ def states(draw, max_offset=0.0):
                 lanes_in=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
                 lanes_out=draw(st.integers(CFG.min_lanes, CFG.max_lanes)),
                 lane_width=draw(st.floats(CFG.lane_width_min, CFG.lane_width_max)),
-                offset=draw(st.floats(-max_offset, max_offset)) if max_offset > 0 else 0.0)
+                offset=draw(st.floats(-max_offset, max_offset)) if max_offset > 0 else 0.0,
+                bend=draw(st.floats(-mb, mb)) if mb > 0 else 0.0,
+                bend_at=(draw(st.floats(CFG.arm_bend_at_min, CFG.arm_bend_at_max)) if mb > 0
+                         else 0.0))
             for a in angles]
     c = draw(st.tuples(st.floats(-100, 100), st.floats(-100, 100)))
     S = pack_state(Intersection(center=np.asarray(c), arms=arms))

@@ -13,7 +13,7 @@ from intersection_estimator.model import Arm, Intersection
 from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.arm_offset import (draw_offset, offset_log_const,
                                                         offset_log_prior, offset_logq)
-from intersection_estimator.topology.state import HDR, OFF, P_C_WIDTH, P_OFF_MAX, pack_state
+from intersection_estimator.topology.state import HDR, OFF, P_C_WIDTH, P_OFF_MAX, STRIDE, pack_state
 
 from .scenes import easy_intersection, same_topology, scene
 
@@ -138,7 +138,7 @@ def test_estimates_off_have_zero_offsets():
     best = _estimate(TopologyConfig(arm_offset_max=0.0), scene(_staggered(3.5), 'tracked', seed=2))
     assert all(a.offset == 0.0 for a in best.arms)
     S = pack_state(best)
-    assert np.all(S[HDR + OFF::6][:len(best.arms)] == 0.0)
+    assert np.all(S[HDR + OFF::STRIDE][:len(best.arms)] == 0.0)
 
 
 def test_offset_is_for_tracked_windows_only_by_default():

@@ -13,7 +13,8 @@ from intersection_estimator.topology.likelihood import (ObservationSet, all_colu
                                                         log_likelihood)
 from intersection_estimator.topology.mcmc import advance, state_log_prior, temperatures
 from intersection_estimator.topology.arm_offset import offset_log_prior
-from intersection_estimator.topology.moves import MOVE_NAMES, OFFSET
+from intersection_estimator.topology.arm_bend import bend_log_prior
+from intersection_estimator.topology.moves import BEND_MOVE, MOVE_NAMES, OFFSET
 from intersection_estimator.topology.prior import log_prior
 from intersection_estimator.topology.state import MAXA, Chain, pack_state
 from reference.likelihood import log_likelihood_reference
@@ -26,7 +27,7 @@ TAB = Tables(CFG)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(states(4.0), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5, 1.0]),
+@given(states(4.0, 40.0), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5, 1.0]),
        st.sampled_from([1, -1]))
 def test_compiled_likelihood_equals_reference(S, seed, lane_norm, side):
     rng = np.random.default_rng(seed)
@@ -35,11 +36,11 @@ def test_compiled_likelihood_equals_reference(S, seed, lane_norm, side):
     assert abs(log_likelihood(S, obs, P) - log_likelihood_reference(S, obs, P)) < 1e-9
 
 
-@pytest.mark.parametrize('offset_max', [0.0, 6.0])
-def test_incremental_likelihood_equals_reference_along_a_chain(offset_max):
+@pytest.mark.parametrize('offset_max,bend_max', [(0.0, 0.0), (6.0, 0.0), (6.0, 30.0)])
+def test_incremental_likelihood_equals_reference_along_a_chain(offset_max, bend_max):
     """After thousands of accepted moves the cached columns give the reference value (with
-    the arm-axis offset off and on)."""
-    TAB = Tables(TopologyConfig(arm_offset_max=offset_max))
+    the arm-axis offset and the bend off and on)."""
+    TAB = Tables(TopologyConfig(arm_offset_max=offset_max, arm_bend_max_deg=bend_max))
     rng = np.random.default_rng(1)
     inter = easy_intersection(4, lanes=((2, 1), (1, 2), (2, 2), (1, 1)))
     obs = random_obs(rng, 150, center=inter.center, spread=50.0)
@@ -59,10 +60,13 @@ def test_incremental_likelihood_equals_reference_along_a_chain(offset_max):
         all_columns(ch.S, TAB.P, *obs.kernel_args()[:8], C2)
         assert np.allclose(ch.C[:n], C2[:n], rtol=0, atol=1e-12)
         assert abs(ch.lp - log_prior(ch.S, TAB.logPA, TAB.logPn, TAB.arm_const)
-                   - offset_log_prior(ch.S, TAB.P)) < 1e-9     # the two priors, added here
+                   - offset_log_prior(ch.S, TAB.P) - bend_log_prior(ch.S, TAB.P)) < 1e-9
     acc = ch.stats[1::2]
-    assert (acc[:6] > 0).all(), acc     # every move kind was accepted at least once
+    # every move kind was accepted at least once (a removal from six arms is rarely valid:
+    # with the bend on, its draws leave none in this chain; the add-arm was accepted)
+    assert (acc[:6 if bend_max == 0 else 4] > 0).all() and acc[5] > 0, acc
     assert (acc[OFFSET] > 0) == (offset_max > 0), acc
+    assert (acc[BEND_MOVE] > 0) == (bend_max > 0), acc
 
 
 def _one_obs(x, y, heading=None, d=1.0):

@@ -10,8 +10,9 @@ from intersection_estimator.model import Arm, Intersection
 from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.mcmc import run_chain
-from intersection_estimator.topology.moves import (ADD_ARM, CHANGE_GAP, LANE, MOVE_NAMES,
-                                                   OFFSET, REMOVE_ARM, ROTATE, SHIFT, WIDTH)
+from intersection_estimator.topology.moves import (ADD_ARM, BEND_MOVE, CHANGE_GAP, LANE,
+                                                   MOVE_NAMES, OFFSET, REMOVE_ARM, ROTATE, SHIFT,
+                                                   WIDTH)
 from intersection_estimator.topology.state import (GAP, HDR, MAXA, NIN, NOUT, P_FOCUS,
                                                    P_FOCUS_P, STRIDE, WID, arm_rows,
                                                    pack_state)
@@ -19,10 +20,11 @@ from reference.moves import is_valid, proposal_log_density, propose_kind, propos
 
 from .strategies import states
 
-# The arm-axis offset on (arm_offset.py), so that every move kind and the add-arm draw of
-# an offset are covered; with it off the offset move is never picked (last test).
+# The arm-axis offset (arm_offset.py) and the bend (arm_bend.py) on, so that every move
+# kind and the add-arm draws are covered; off, their moves are never picked.
 OFF_MAX = 6.0
-CFG = TopologyConfig(arm_offset_max=OFF_MAX)
+BEND_MAX = 30.0
+CFG = TopologyConfig(arm_offset_max=OFF_MAX, arm_bend_max_deg=BEND_MAX)
 TAB = Tables(CFG)
 P = TAB.P
 SET = settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -33,13 +35,13 @@ def _lq(S_from, S_to, kind):
 
 
 @SET
-@given(states(OFF_MAX))
+@given(states(OFF_MAX, BEND_MAX))
 def test_generated_states_are_valid(S):
     assert is_valid(S, P)
 
 
 @SET
-@given(states(OFF_MAX), st.sampled_from(range(len(MOVE_NAMES))), st.integers(0, 2 ** 31 - 2))
+@given(states(OFF_MAX, BEND_MAX), st.sampled_from(range(len(MOVE_NAMES))), st.integers(0, 2 ** 31 - 2))
 def test_every_move_keeps_the_model_valid(S, kind, seed):
     ok, lq, S2 = propose_move(S, kind, P, TAB.logqn, seed)
     if ok:
@@ -48,7 +50,8 @@ def test_every_move_keeps_the_model_valid(S, kind, seed):
 
 
 @SET
-@given(states(OFF_MAX), st.sampled_from([ROTATE, SHIFT, CHANGE_GAP, WIDTH, OFFSET]),
+@given(states(OFF_MAX, BEND_MAX), st.sampled_from([ROTATE, SHIFT, CHANGE_GAP, WIDTH, OFFSET,
+                                                    BEND_MOVE]),
        st.integers(0, 2 ** 31 - 2))
 def test_continuous_moves_are_symmetric(S, kind, seed):
     ok, lq, S2 = propose_move(S, kind, P, TAB.logqn, seed)
@@ -64,7 +67,8 @@ def test_continuous_moves_are_symmetric(S, kind, seed):
         if len(changed):
             i = changed[0]
             step = {ROTATE: math.radians(CFG.rotate_max_deg), CHANGE_GAP: CFG.gap_step,
-                    WIDTH: CFG.width_step, OFFSET: CFG.offset_step}[kind]
+                    WIDTH: CFG.width_step, OFFSET: CFG.offset_step,
+                    BEND_MOVE: max(math.radians(CFG.bend_step_deg), CFG.bend_at_step)}[kind]
             d = S2[i] - S[i]
             if kind == ROTATE:
                 d = (d + math.pi) % (2 * math.pi) - math.pi
@@ -89,7 +93,7 @@ def _apply_lane_op(S, k, entering, add, variant):
 
 
 @SET
-@given(states(OFF_MAX), st.integers(0, 2 ** 31 - 2))
+@given(states(OFF_MAX, BEND_MAX), st.integers(0, 2 ** 31 - 2))
 def test_lane_move_has_its_reverse(S, seed):
     ok, lq, S2 = propose_move(S, LANE, P, TAB.logqn, seed)
     if not ok:
@@ -131,7 +135,7 @@ def test_lane_move_rescale_keeps_road_width():
 
 
 @SET
-@given(states(OFF_MAX), st.integers(0, 2 ** 31 - 2))
+@given(states(OFF_MAX, BEND_MAX), st.integers(0, 2 ** 31 - 2))
 def test_add_arm_ratio_matches_reference(S, seed):
     ok, lq, S2 = propose_move(S, ADD_ARM, P, TAB.logqn, seed)
     if not ok:
@@ -144,7 +148,7 @@ def test_add_arm_ratio_matches_reference(S, seed):
 
 
 @SET
-@given(states(OFF_MAX), st.integers(0, 2 ** 31 - 2))
+@given(states(OFF_MAX, BEND_MAX), st.integers(0, 2 ** 31 - 2))
 def test_remove_arm_ratio_matches_reference(S, seed):
     ok, lq, S2 = propose_move(S, REMOVE_ARM, P, TAB.logqn, seed)
     n = int(S[2])
@@ -191,11 +195,12 @@ def test_add_then_remove_round_trip_is_detailed_balance_consistent():
     assert hits > 50
 
 
-@pytest.mark.parametrize('offset_max', [0.0, OFF_MAX])
-def test_move_frequencies_follow_algorithm_1(offset_max):
+@pytest.mark.parametrize('offset_max,bend_max', [(0.0, 0.0), (OFF_MAX, 0.0), (0.0, 30.0),
+                                                 (OFF_MAX, 30.0)])
+def test_move_frequencies_follow_algorithm_1(offset_max, bend_max):
     """omega ~ U[0,1] picks the paper's moves with their probabilities (+ width, + offset
-    when the offset is on; never when it is off)."""
-    cfg = TopologyConfig(arm_offset_max=offset_max)
+    and + bend when they are on; never when they are off)."""
+    cfg = TopologyConfig(arm_offset_max=offset_max, arm_bend_max_deg=bend_max)
     tab = Tables(cfg)
     S = pack_state(Intersection(center=np.zeros(2), arms=[Arm(angle=a) for a in (0.0, 2.0, -2.0)]))
     C = np.zeros((MAXA, 0))
@@ -207,7 +212,8 @@ def test_move_frequencies_follow_algorithm_1(offset_max):
               z, n, np.ones(n), 1, stats, np.zeros(6, np.int64), False)
     counts = stats[0::2] / n
     p = np.array([cfg.p_rotate, cfg.p_shift, cfg.p_gap, cfg.p_arm / 2, cfg.p_arm / 2,
-                  cfg.p_lane, cfg.p_width, cfg.p_offset if offset_max > 0 else 0.0])
+                  cfg.p_lane, cfg.p_width, cfg.p_offset if offset_max > 0 else 0.0,
+                  cfg.p_bend if bend_max > 0 else 0.0])
     p = p / p.sum()
     assert np.all(np.abs(counts - p) < 0.015), (counts, p)
     if offset_max == 0.0:
@@ -215,7 +221,7 @@ def test_move_frequencies_follow_algorithm_1(offset_max):
 
 
 @SET
-@given(states(OFF_MAX), st.sampled_from([ROTATE, CHANGE_GAP, WIDTH, OFFSET]), st.integers(0, 2 ** 31 - 2),
+@given(states(OFF_MAX, BEND_MAX), st.sampled_from([ROTATE, CHANGE_GAP, WIDTH, OFFSET]), st.integers(0, 2 ** 31 - 2),
        st.integers(0, 7))
 def test_focused_arm_moves_change_the_focus_arm_and_stay_symmetric(S, kind, seed, focus):
     """The descent's focus (``P_FOCUS``): with probability 1 every arm move picks that slot
@@ -239,7 +245,7 @@ P_LAPLACE = Tables(TopologyConfig(arm_offset_max=OFF_MAX, arm_offset_prior='lapl
 
 
 @SET
-@given(states(OFF_MAX), st.integers(0, 2 ** 31 - 2))
+@given(states(OFF_MAX, BEND_MAX), st.integers(0, 2 ** 31 - 2))
 def test_add_arm_ratio_with_the_laplace_offset_prior(S, seed):
     """The add-arm move's log ratio with the Laplace offset draw is the reverse removal's
     proposal density over the forward one's, under the same prior kind."""

@@ -69,6 +69,29 @@ def test_part_outside_keeps_the_approach_of_a_vehicle_seen_near_the_box_only():
     assert sorted(np.round(obs.x, 6)) == [-50.0, 50.0]
 
 
+def test_part_pieces_keep_a_curved_approach():
+    """With ``part_piece_m`` 10 m a 60 m approach that bends by 30 deg gives six means
+    along the curve, each 1/6 of the part (the part weighs one vehicle passage, as
+    without pieces), each within 0.3 m of the path and with its local direction; one mean
+    for the whole part lies metres inside the curve."""
+    s = np.arange(0.0, 60.5, 0.5)
+    head = np.radians(30.0) * np.clip(s / 60.0, 0.0, 1.0)
+    path = np.cumsum(0.5 * np.stack([np.cos(head), np.sin(head)], axis=1), axis=0)
+    xy = (path - path[-1])[::-1] - [12.0, 0.0]      # entering, toward the center at the origin
+    hd = head[::-1] + math.pi
+    dets = Detections.make(np.concatenate([xy, [[0.0, 0.0]]]), t=np.arange(len(xy) + 1) * 0.1,
+                           heading=np.r_[hd, hd[-1]], track_id=2)
+    cfg = replace(CFG, part_outside=10.0, trim_turn_deg=0.0)
+    one = tracked_observations(dets, (0.0, 0.0), cfg)
+    obs = tracked_observations(dets, (0.0, 0.0), replace(cfg, part_piece_m=10.0))
+    assert len(one) == 1 and len(obs) == 6
+    assert np.allclose(obs.w, 1.0 / 6.0) and np.allclose(obs.passages, 1.0 / 6.0)
+    gap = [np.min(np.hypot(*(xy - p).T)) for p in obs.xy]
+    assert max(gap) < 0.3 < np.min(np.hypot(*(xy - one.xy[0]).T))
+    turn = np.degrees(np.abs(np.diff(np.unwrap(np.arctan2(obs.hy, obs.hx)))))
+    assert turn.sum() > 20.0
+
+
 def test_static_false_tracks_are_dropped():
     rng = np.random.default_rng(0)
     xy = rng.normal([30.0, 5.0], 0.8, (4, 2))
