@@ -87,12 +87,6 @@ RANGES = {
     'lane_count_prior': (None, 'P(lanes per direction = i), i = 0..len-1'),
     # likelihood (§II-C2)
     'sigma_track': ('[0.01, 20]', 'lateral sigma of a trajectory part\'s mean point [m]'),
-    'sigma_track_per_m': ('[0, 1]', 'lateral sigma of a trajectory part grows by this much per metre '
-                          'its mean point lies from the center, hypot(sigma, k r): a curved '
-                          'approach leaves a straight arm ray by more the farther out (beyond '
-                          'the paper) [m/m]'),
-    'sigma_track_grow_from': ('[0, 200]', 'distance from the center where sigma_track_per_m starts '
-                              'to count (r above it) [m]'),
     'sigma_track_weak': ('[0.01, 20]', 'lateral sigma of a trajectory part of a weak_labels road '
                          'user (cyclist, pedestrian: not at a lane center) [m]'),
     'weak_labels': (None, 'Autoware classification labels whose tracks count as traffic of an '
@@ -236,8 +230,6 @@ class TopologyConfig:
     # likelihood
     sigma_track: float = 0.8
     sigma_track_weak: float = 4.0
-    sigma_track_per_m: float = 0.0
-    sigma_track_grow_from: float = 0.0
     weak_labels: tuple = (6, 7)
     sigma_point: float = 1.2
     sigma_angle_deg: float = 5.0
@@ -408,7 +400,7 @@ def _check_flags(cfg) -> None:
 
 #: The parameters preprocessing (preprocess.py, voxels.py, init.py) reads.
 PREPROCESS_FIELDS = (
-    'sigma_track', 'sigma_track_weak', 'sigma_track_per_m', 'sigma_track_grow_from', 'weak_labels', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
+    'sigma_track', 'sigma_track_weak', 'weak_labels', 'sigma_point', 'sigma_angle_deg', 'pca_radius', 'voxel_size',
     'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',

@@ -96,31 +96,24 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
     hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
     d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, o[:, 5].copy(),
-                         _part_sigma(track_label, o[:, 4].astype(np.int64), cfg,
-                                     np.hypot(o[:, 0] - c[0], o[:, 1] - c[1])),
+                         _part_sigma(track_label, o[:, 4].astype(np.int64), cfg),
                          np.full(len(o), math.radians(cfg.sigma_angle_deg)), o[:, 5].copy())
     # parts cut at part_outside: that radius is also their box radius
     return _drop_near_center(obs, c, cfg, far=False,
                              inner=cfg.part_outside if cfg.part_outside > 0 else None)
 
 
-def _part_sigma(track_label, part_track, cfg: PreprocessConfig, r) -> np.ndarray:
+def _part_sigma(track_label, part_track, cfg: PreprocessConfig) -> np.ndarray:
     """Orthogonal-distance sigma per trajectory part: ``sigma_track``, and
     ``sigma_track_weak`` for road users that do not keep to a lane's center
     (``weak_labels``, Autoware classification ids; by default bicycle 6 and pedestrian 7:
     a cyclist rides at the kerb side of its lane). Beyond the paper: such a part still
     shows that its arm exists and carries traffic, but its lateral position cannot ask for
-    a lane of its own. With ``sigma_track_per_m`` = k the sigma is ``hypot(sigma, k r')``
-    for a part mean ``r' = r - sigma_track_grow_from`` metres beyond that radius (§II-B's lanes are straight rays; a
-    curved approach leaves its ray by more the farther out, so the parts near the box
-    place the lanes)."""
+    a lane of its own."""
     sig = np.full(len(part_track), cfg.sigma_track)
     if cfg.weak_labels and len(part_track):
         weak = np.isin(track_label[part_track], np.asarray(cfg.weak_labels, np.int64))
         sig[weak] = cfg.sigma_track_weak
-    if cfg.sigma_track_per_m > 0:
-        beyond = np.maximum(np.asarray(r, float) - cfg.sigma_track_grow_from, 0.0)
-        sig = np.hypot(sig, cfg.sigma_track_per_m * beyond)
     return sig
 
 
