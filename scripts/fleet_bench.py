@@ -167,21 +167,16 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
     maps = _maps(seed, sc, tmp)
     dets = sc.detections('tracked')
     view = compare(r.intersection, r.lanelets, maps['none'][1], CFG, drive_traffic(dets, maps['none'][1], CFG))
-    rows.append({'seed': seed, 'edit': 'none', 'applicable': True, 'observable': True, 'hit': not view.findings,
-                 'false': any(f.kind != 'connector_unused' for f in view.findings),
-                 'false_incl_unused': bool(view.findings), 'claimed': [f.key for f in view.findings]})
+    rows.append({'seed': seed, 'edit': 'none', 'applicable': True, 'observable': True,
+                 **_scored(view.findings, lambda f: False), 'hit': not view.findings})
     for edit in EDITS:
         what, X = maps[edit]
         if X is None:
             rows.append({'seed': seed, 'edit': edit, 'applicable': False})
             continue
         fs = compare(r.intersection, r.lanelets, X, CFG, drive_traffic(dets, X, CFG)).findings
-        hits = [f for f in fs if _hit(edit, what, f, X, sc)]
-        others = [f for f in fs if f not in hits[:1]]
         rows.append({'seed': seed, 'edit': edit, 'applicable': True, 'observable': _observable(edit, what, sc),
-                     'what': what, 'hit': bool(hits),
-                     'false': any(f.kind != 'connector_unused' for f in others),
-                     'false_incl_unused': bool(others), 'claimed': [f.key for f in fs]})
+                     'what': what, **_scored(fs, lambda f: _hit(edit, what, f, X, sc))})
     if WORLD:
         rows.append(_closed_arm_row(seed, sc, maps['none'][1]))
     return rows
@@ -207,11 +202,46 @@ def _closed_arm_row(seed: int, sc, X) -> dict:
     m = _mapped_arm_of(sc, what['arm'], X)
     fs = [] if r.intersection is None else compare(
         r.intersection, r.lanelets, X, CFG, drive_traffic(world.detections('tracked'), X, CFG)).findings
-    hits = [f for f in fs if f.kind == 'arm_removed' and f.map_arm == m]
-    others = [f for f in fs if f not in hits[:1]]
     return {'seed': seed, 'edit': 'arm_closed', 'applicable': True, 'observable': True, 'what': what,
-            'hit': bool(hits), 'false': any(f.kind != 'connector_unused' for f in others),
-            'false_incl_unused': bool(others), 'claimed': [f.key for f in fs]}
+            **_scored(fs, lambda f: f.kind == 'arm_removed' and f.map_arm == m)}
+
+
+def _scored(fs, is_hit) -> dict:
+    """A row's flags from its findings ``fs``: hit (one finding is the applied edit),
+    false (any other finding but an unused connector), and every claim with its confidence
+    and whether it is the edit (for :func:`_operating_points`)."""
+    hits = [f for f in fs if is_hit(f)]
+    others = [f for f in fs if f not in hits[:1]]
+    return {'hit': bool(hits), 'false': any(f.kind != 'connector_unused' for f in others),
+            'false_incl_unused': bool(others), 'claimed': [f.key for f in fs],
+            'claims': [{'key': f.key, 'kind': f.kind, 'confidence': round(float(f.confidence), 4),
+                        'hit': f in hits} for f in fs]}
+
+
+#: reporting thresholds of the operating-point table (ChangeConfig.min_confidence is the first)
+TAUS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
+
+
+def _operating_points(rows: list[dict]) -> list[dict]:
+    """Per edit and reporting threshold ``tau``: recall and false rate when only findings
+    of confidence >= tau are reported (the same rows; what a user gets from raising
+    ``min_confidence``)."""
+    out = []
+    for edit in ('none',) + EDITS + (tuple(WORLD_EDITS) if WORLD else ()):
+        rs = [r for r in rows if r['edit'] == edit and r['applicable'] and 'claims' in r]
+        row = {'edit': edit}
+        for tau in TAUS:
+            rec = fal = 0
+            for r in rs:
+                kept = [c for c in r['claims'] if c['confidence'] >= tau]
+                hits = [c for c in kept if c['hit']]
+                others = [c for c in kept if c is not (hits[0] if hits else None)]
+                rec += (not kept) if edit == 'none' else bool(hits)
+                fal += any(c['kind'] != 'connector_unused' for c in others)
+            n = max(len(rs), 1)
+            row[f'{tau:g}'] = f'{100 * rec / n:.1f} / {100 * fal / n:.1f}'
+        out.append(row)
+    return out
 
 
 def _kind_table(rows: list[dict]) -> list[dict]:
@@ -368,6 +398,9 @@ def main() -> int:
             out['kinds_rows'] = rows
             print(_md(out['kinds'], ['edit', 'expected', 'cases', 'not_applicable', 'recall', 'observable',
                                      'recall_observable', 'false_rate', 'false_rate_incl_unused']))
+            out['operating_points'] = _operating_points(rows)
+            print('recall / false [%] when only findings of confidence >= tau are reported:')
+            print(_md(out['operating_points'], ['edit'] + [f'{t:g}' for t in TAUS]))
             print(f'({time.perf_counter() - t0:.0f} s)')
         if args.fusion_n:
             out['fusion'] = _fusion_table(range(args.fusion_seed, args.fusion_seed + args.fusion_n), args.share, tmp)
