@@ -176,7 +176,8 @@ def _case_rows(seed: int, tmp: Path) -> list[dict]:
             continue
         fs = compare(r.intersection, r.lanelets, X, CFG, drive_traffic(dets, X, CFG)).findings
         rows.append({'seed': seed, 'edit': edit, 'applicable': True, 'observable': _observable(edit, what, sc),
-                     'what': what, **_scored(fs, lambda f: _hit(edit, what, f, X, sc))})
+                     'what': what, **_scored(fs, lambda f: _hit(edit, what, f, X, sc),
+                                             _part_of(edit, what, X, sc))})
     if WORLD:
         rows.append(_closed_arm_row(seed, sc, maps['none'][1]))
     return rows
@@ -206,16 +207,26 @@ def _closed_arm_row(seed: int, sc, X) -> dict:
             **_scored(fs, lambda f: f.kind == 'arm_removed' and f.map_arm == m)}
 
 
-def _scored(fs, is_hit) -> dict:
+def _scored(fs, is_hit, is_part=lambda f: False) -> dict:
     """A row's flags from its findings ``fs``: hit (one finding is the applied edit),
-    false (any other finding but an unused connector), and every claim with its confidence
-    and whether it is the edit (for :func:`_operating_points`)."""
+    false (any other finding but an unused connector or one that is part of the edit,
+    ``is_part``), and every claim with its confidence and whether it is the edit (for
+    :func:`_operating_points`)."""
     hits = [f for f in fs if is_hit(f)]
-    others = [f for f in fs if f not in hits[:1]]
+    others = [f for f in fs if f not in hits[:1] and not is_part(f)]
     return {'hit': bool(hits), 'false': any(f.kind != 'connector_unused' for f in others),
             'false_incl_unused': bool(others), 'claimed': [f.key for f in fs],
             'claims': [{'key': f.key, 'kind': f.kind, 'confidence': round(float(f.confidence), 4),
-                        'hit': f in hits} for f in fs]}
+                        'hit': f in hits, 'part': bool(is_part(f))} for f in fs]}
+
+
+def _part_of(edit, what, X, sc):
+    """Findings that are part of the edit: with an arm gone from the map, a lane its turns
+    needed on another arm is gone too (``edits._arm_removed``), and showing it is right."""
+    if edit != 'arm_removed' or not what.get('lanes'):
+        return lambda f: False
+    gone = {(_mapped_arm_of(sc, arm, X), 'in' if kind == 'entering' else 'out') for arm, kind in what['lanes']}
+    return lambda f: f.kind == 'lane_added' and (f.map_arm, f.direction) in gone
 
 
 #: reporting thresholds of the operating-point table (ChangeConfig.min_confidence is the first)
@@ -235,7 +246,7 @@ def _operating_points(rows: list[dict]) -> list[dict]:
             for r in rs:
                 kept = [c for c in r['claims'] if c['confidence'] >= tau]
                 hits = [c for c in kept if c['hit']]
-                others = [c for c in kept if c is not (hits[0] if hits else None)]
+                others = [c for c in kept if c is not (hits[0] if hits else None) and not c.get('part')]
                 rec += (not kept) if edit == 'none' else bool(hits)
                 fal += any(c['kind'] != 'connector_unused' for c in others)
             n = max(len(rs), 1)

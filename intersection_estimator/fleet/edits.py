@@ -53,8 +53,22 @@ def _shift(l, vec, weights=None):
 
 
 def _arm_removed(lls, rng, gt, traffic):
+    """One arm gone from the map with its lanes and turns -- and the lanes of other arms
+    whose every turn led into it or came from it (a turn pocket into a new road is as new
+    as the road): a map without the arm has no lane into nowhere. ``what['lanes']`` lists
+    their (arm, kind): showing them is part of the change, not another one."""
     a = int(rng.integers(len(gt.arms)))
-    return [l for l in lls if l.arm != a and l.arm_to != a], {'arm': a}
+    con = {l.id: l for l in lls if l.kind == 'connector'}
+    fed = {}
+    for c in con.values():
+        for s in c.successors:
+            fed.setdefault(s, []).append(c)
+    orphans = [l for l in lls if l.arm != a and (
+        (l.kind == 'entering' and l.successors and all(con[s].arm_to == a for s in l.successors if s in con))
+        or (l.kind == 'leaving' and fed.get(l.id) and all(c.arm == a for c in fed[l.id])))]
+    gone = {l.id for l in orphans}
+    kept = [l for l in lls if l.arm != a and l.arm_to != a and l.id not in gone]
+    return kept, {'arm': a, 'lanes': sorted({(int(l.arm), l.kind) for l in orphans})}
 
 
 def _lane_added(lls, rng, gt, traffic):
