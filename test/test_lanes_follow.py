@@ -6,6 +6,7 @@ from dataclasses import replace
 import math
 
 import numpy as np
+import pytest
 
 from intersection_estimator.evaluate import lane_distance
 from intersection_estimator.lanes import LaneConfig
@@ -149,3 +150,20 @@ def test_compiled_normal_equations_match_the_design_matrix():
         ref_BtB, ref_Btr = normal_reference(s, r, w, lo, hi, knots)
         assert np.allclose(BtB, ref_BtB, rtol=1e-12, atol=1e-12)
         assert np.allclose(Btr, ref_Btr, rtol=1e-12, atol=1e-12)
+
+
+def test_a_bent_arm_reaches_the_lane_step_as_its_chord():
+    """The lane step draws straight lanes and bends them itself: a topology arm bent by
+    30 deg at 20 m arrives as the straight arm through its axis point 50 m out (angle
+    atan2(20 sin 0 + 30 sin 30, 20 + 30 cos 30) from the axis), unbent; an unbent
+    topology is passed on as it is."""
+    from intersection_estimator.lanes.init import chord_arms
+    straight = Intersection(center=np.zeros(2), arms=[Arm(angle=a) for a in (0.0, 2.0, -2.0)])
+    assert chord_arms(straight) is straight
+    bent = Intersection(center=np.zeros(2), arms=[Arm(angle=0.0, bend=math.radians(30), bend_at=20.0),
+                                                  Arm(angle=2.0), Arm(angle=-2.0)])
+    out = chord_arms(bent)
+    east = min(out.arms, key=lambda a: abs(a.angle))
+    want = math.atan2(30 * math.sin(math.radians(30)), 20 + 30 * math.cos(math.radians(30)))
+    assert east.angle == pytest.approx(want) and east.bend == 0.0 and east.bend_at == 0.0
+    assert [a.angle for a in out.arms if a is not east] == [-2.0, 2.0]

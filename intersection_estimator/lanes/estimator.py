@@ -17,8 +17,8 @@ from scipy.spatial import cKDTree
 from ..model import ENTERING, LEAVING, Intersection, Lanelet, topology_key
 from ..observations import Detections
 from .config import LaneConfig
-from .init import (arm_frames, assign_parts, connector_id, fit_frames, lane_id, lane_specs,
-                   stop_distances, trajectories)
+from .init import (arm_frames, assign_parts, chord_arms, connector_id, fit_frames, lane_id,
+                   lane_specs, stop_distances, trajectories)
 from .likelihood import all_terms, assign_points, station_csr
 from . import mcmc as M
 from .mcmc import run_chain
@@ -128,6 +128,7 @@ class LaneCourseEstimator:
         new observations moved the initialisation (stop lines, lane fits) and the
         lanelets are rebuilt from it."""
         t0 = time.perf_counter()
+        topology = chord_arms(topology)
         self._trajs, frames, self.stops = self._preprocess(topology, dets)
         specs, pairs, _ = lane_specs(topology, self._trajs, self.config, stops=self.stops,
                                      frames=frames)

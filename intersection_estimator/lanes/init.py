@@ -19,7 +19,7 @@ it. Lanelets of both directions of an arm end/start at that distance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -204,6 +204,33 @@ class ArmFrame:
 
     def point(self, s, lat):
         return self.origin + np.multiply.outer(s, self.u) + np.multiply.outer(lat, self.n)
+
+
+#: how far out the lane step's straight arm meets a bent arm's axis [m] (:func:`chord_arms`)
+CHORD_M = 50.0
+
+
+def chord_arms(topo: Intersection, reach: float = CHORD_M) -> Intersection:
+    """``topo`` with every bent arm (``Arm.bend``, topology/arm_bend.py) replaced by the
+    straight arm from its axis origin to the point ``reach`` metres along its bent axis:
+    the lane step starts from straight lanes (§III-A) and bends them to the traffic itself
+    (``follow.py``); a bent arm's angle is that of its piece next to the box, and a straight
+    lane at that angle runs off the traffic beyond the kink. Unchanged (the same object)
+    when no arm bends."""
+    if all(a.bend == 0.0 for a in topo.arms):
+        return topo
+    arms = []
+    for a in topo.arms:
+        if a.bend != 0.0 and a.bend_at < reach:
+            u2 = np.array([math.cos(a.angle + a.bend), math.sin(a.angle + a.bend)])
+            p = a.bend_at * a.direction + (reach - a.bend_at) * u2
+            a = replace(a, angle=math.atan2(p[1], p[0]))
+        arms.append(replace(a, bend=0.0, bend_at=0.0))
+    out = replace(topo, arms=arms)
+    # the lane ids and supports go by arm index: a chord that would reorder the arms is not taken
+    if [id(a) for a in out.arms] != [id(a) for a in arms]:
+        return replace(topo, arms=[replace(a, bend=0.0, bend_at=0.0) for a in topo.arms])
+    return out
 
 
 def arm_frames(topo: Intersection) -> list[ArmFrame]:

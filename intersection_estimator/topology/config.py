@@ -215,9 +215,9 @@ class TopologyConfig:
     arm_offset_max: float = 6.0
     arm_offset_sigma: float = 1.0
     arm_offset_prior: str = 'laplace'
-    arm_bend_max_deg: float = 0.0
+    arm_bend_max_deg: float = 30.0
     arm_bend_scale_deg: float = 10.0
-    arm_bend_at_min: float = 5.0
+    arm_bend_at_min: float = 10.0
     arm_bend_at_max: float = 60.0
     arm_offset_tracks_only: bool = True
     lane_width: float = 3.5

@@ -19,7 +19,7 @@ from intersection_estimator.topology.state import P_BEND_MAX, P_C_OFFSET, pack_s
 
 from .scenes import easy_intersection, same_topology, scene
 
-ON = TopologyConfig(arm_bend_max_deg=45.0, arm_bend_at_min=10.0)
+ON = TopologyConfig(arm_bend_max_deg=45.0)
 
 
 def test_unbend_measures_beyond_the_kink_along_the_outer_piece():
@@ -44,10 +44,10 @@ def _one_arm_state(beta):
 
 
 def test_off_draws_nothing_and_never_picks_the_move():
-    """Off (arm_bend_max_deg 0): no random number is consumed, the move's cumulative
+    """Off (arm_bend_max_deg 0; on by default): no random number is consumed, the move's cumulative
     probability ends before it, the prior adds nothing; on, a straight arm adds nothing
     either (the prior is the unnormalised exp(-|beta| / b), module doc)."""
-    P = TopologyConfig().kernel_params()
+    P = TopologyConfig(arm_bend_max_deg=0.0).kernel_params()
     assert P[P_BEND_MAX] == 0.0 and P[P_C_OFFSET] == 1.0
 
     @njit
@@ -139,4 +139,4 @@ def test_a_curved_approach_is_followed_when_on(seed):
     bent = min(best.arms, key=lambda a: abs(math.remainder(a.angle - math.pi / 2, 2 * math.pi)))
     assert 15.0 < math.degrees(bent.bend) < 45.0 and 15.0 < bent.bend_at < 50.0
     assert all(abs(math.degrees(a.bend)) < 8.0 for a in best.arms if a is not bent)
-    assert not same_topology(gt, _estimate(TopologyConfig(), dets), tol_deg=8.0)
+    assert not same_topology(gt, _estimate(TopologyConfig(arm_bend_max_deg=0.0), dets), tol_deg=8.0)

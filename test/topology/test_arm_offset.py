@@ -17,7 +17,7 @@ from intersection_estimator.topology.state import HDR, OFF, P_C_WIDTH, P_OFF_MAX
 
 from .scenes import easy_intersection, same_topology, scene
 
-ON = TopologyConfig(arm_offset_max=6.0, arm_offset_sigma=4.0)
+ON = TopologyConfig(arm_offset_max=6.0, arm_offset_sigma=4.0, arm_bend_max_deg=0.0)   # the offset alone
 
 
 def _one_arm_state(o):
@@ -61,7 +61,7 @@ def test_new_arm_draw_follows_its_density(kind):
 def test_off_draws_nothing_and_never_picks_the_move():
     """Off (arm_offset_max 0): no random number is consumed, offsets stay 0, the move's
     cumulative probability ends at the width move, the prior adds nothing."""
-    P = TopologyConfig(arm_offset_max=0.0).kernel_params()
+    P = TopologyConfig(arm_offset_max=0.0, arm_bend_max_deg=0.0).kernel_params()
     assert P[P_C_WIDTH] == 1.0
 
     @njit

@@ -10,7 +10,7 @@ from intersection_estimator.topology.cost_model import format_cost, plain_prices
 from intersection_estimator.topology.likelihood import full_loglik
 from intersection_estimator.topology.mcmc import (W_ENTRIES, W_LOGS, W_MOVES, W_MUST_ENTRIES,
                                                   W_MUST_LOGS, W_VISITS, new_work, run_chain)
-from intersection_estimator.topology.moves import REMOVE_ARM, SHIFT, propose
+from intersection_estimator.topology.moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
 from intersection_estimator.topology.state import MAXA, pack_state
 
 from .scenes import easy_intersection, scene
@@ -65,7 +65,7 @@ def test_work_counters_and_audit_match_a_brute_force_count_move_by_move():
         Sc = S.copy()
         run_chain(Sc, C, ll, 0.0, S.copy(), -np.inf, TAB.P, TAB.logPA, TAB.logPn,
                   TAB.arm_const, TAB.logqn, TAB.cumqn, *obs.kernel_args(), 1, np.ones(1),
-                  seed, np.zeros(14, np.int64), work, True)
+                  seed, np.zeros(2 * len(MOVE_NAMES), np.int64), work, True)
         if not ok:
             assert work.sum() == 0
             continue

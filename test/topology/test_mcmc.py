@@ -8,6 +8,7 @@ from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.likelihood import full_loglik
 from intersection_estimator.topology.mcmc import advance, temperatures
+from intersection_estimator.topology.moves import MOVE_NAMES
 from intersection_estimator.topology.prior import log_prior
 from intersection_estimator.topology.state import MAXA, Chain, pack_state
 from reference.likelihood import log_likelihood_reference
@@ -15,7 +16,7 @@ from reference.likelihood import log_likelihood_reference
 from .scenes import easy_intersection, scene
 
 # the paper's chain (straight rays): the arm-axis offset has its own tests (test_arm_offset)
-CFG = TopologyConfig(arm_offset_max=0.0)
+CFG = TopologyConfig(arm_offset_max=0.0, arm_bend_max_deg=0.0)   # the paper's moves
 TAB = Tables(CFG)
 
 
@@ -32,7 +33,7 @@ def _chain(obs, inter):
     ll = float(full_loglik(S, TAB.P, *obs.kernel_args(), C))
     lp = float(log_prior(S, TAB.logPA, TAB.logPn, TAB.arm_const))
     return Chain(S=S, C=C, ll=ll, lp=lp, best_S=S.copy(), best_lpost=ll + lp, step=0,
-                 stats=np.zeros(14, np.int64))
+                 stats=np.zeros(2 * len(MOVE_NAMES), np.int64))
 
 
 def _obs():
