@@ -215,7 +215,7 @@ class TopologyConfig:
     arm_offset_max: float = 6.0
     arm_offset_sigma: float = 1.0
     arm_offset_prior: str = 'laplace'
-    arm_bend_max_deg: float = 30.0
+    arm_bend_max_deg: float = 0.0
     arm_bend_scale_deg: float = 10.0
     arm_bend_at_min: float = 10.0
     arm_bend_at_max: float = 60.0
