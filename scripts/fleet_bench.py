@@ -305,7 +305,8 @@ def _fusion_table(seeds, share: float, tmp: Path) -> list[dict]:
             hits = [c for c in ch if _hit(edit, what, c, X, sc)]
             res[k]['n'] += 1
             res[k]['hit'] += bool(hits)
-            others = [c for c in ch if c not in hits[:1]]
+            part = _part_of(edit, what, X, sc)
+            others = [c for c in ch if c not in hits[:1] and not part(c)]
             # as in the kinds table: 'connector_unused' counted apart (true of the data)
             res[k]['false'] += any(c.kind != 'connector_unused' for c in others)
             res[k]['false_strict'] += bool(others)
