@@ -38,3 +38,15 @@ def fleet_data(tmp_path_factory):
     lls, what = apply_edit(sc, 'lane_moved', np.random.default_rng(5))
     write_osm(root / 'map.osm', lls)
     return {'root': root, 'bags': root / 'bags', 'map': root / 'map.osm', 'moved': what['lane']}
+
+
+def without_edit_lanes(edit: str, what: dict, findings: list) -> list:
+    """``findings`` without the ``lane_added`` an ``arm_removed`` edit made true: the lanes
+    of other arms that only its turns needed went with the arm (``edits._arm_removed``), one
+    per listed direction at most."""
+    if edit != 'arm_removed':
+        return list(findings)
+    extra = [f for f in findings if f.kind == 'lane_added']
+    assert len(extra) <= len(what['lanes'])
+    assert {f.direction for f in extra} <= {'in' if k == 'entering' else 'out' for _, k in what['lanes']}
+    return [f for f in findings if f.kind != 'lane_added']

@@ -15,6 +15,8 @@ from intersection_estimator.fleet.corroborate import drive_traffic
 from intersection_estimator.fleet.edits import EDITS, EXPECTED, apply_edit
 from intersection_estimator.fleet.prior_map import load_prior_map
 
+from .conftest import without_edit_lanes
+
 SEEDS = (1, 2, 5)
 
 
@@ -38,12 +40,7 @@ def test_each_edit_found_and_nothing_else(tmp_path, cases, seed, edit):
         (f,) = [f for f in view.weak if f.kind == 'lane_removed']
         assert f.evidence['vehicles_its_turns'] <= 2 and 0 < f.confidence <= 0.5
         return
-    found = view.findings
-    if edit == 'arm_removed':    # the lanes only its turns needed went with it (edits._arm_removed)
-        extra = [f for f in found if f.kind == 'lane_added']
-        assert len(extra) <= len(what['lanes'])
-        assert {f.direction for f in extra} <= {'in' if k == 'entering' else 'out' for _, k in what['lanes']}
-        found = [f for f in found if f.kind != 'lane_added']
+    found = without_edit_lanes(edit, what, view.findings)
     assert [f.kind for f in found] == [EXPECTED[edit]], (what, view.findings)
     f = found[0]
     assert 0.5 < f.confidence <= 1.0 and f.evidence['passages'] > 0
