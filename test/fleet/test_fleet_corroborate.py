@@ -19,6 +19,7 @@ from intersection_estimator.model import ENTERING, LEAVING
 
 from .conftest import without_edit_lanes
 
+
 def _prior(tmp_path, lls):
     (X,) = load_prior_map(write_osm(tmp_path / 'prior.osm', lls))
     return X
