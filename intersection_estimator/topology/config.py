@@ -450,14 +450,16 @@ class Tables:
         if cfg.offset_on:
             self.arm_const += offset_log_const(cfg.arm_offset_sigma, cfg.arm_offset_max,
                                                cfg.arm_offset_prior == 'laplace')
-        #: the bend grid of :func:`.refit.refit_bend` (empty when the bend is off)
-        self.bends, self.bend_ats = np.zeros(0), np.zeros(0)
+        #: the (bend, place) points of :func:`.refit.refit_bend`: every 2.5 deg x 5 m, then
+        #: straight (0, 0) last; empty when the bend is off
+        self.bend_grid = np.zeros((0, 2))
         if cfg.bend_on:
             mb = math.radians(cfg.arm_bend_max_deg)
             nb = int(math.ceil(cfg.arm_bend_max_deg / 2.5))
-            self.bends = np.array([b for b in np.linspace(-mb, mb, 2 * nb + 1) if b != 0.0])
-            self.bend_ats = np.linspace(cfg.arm_bend_at_min, cfg.arm_bend_at_max, int(math.ceil(
+            ats = np.linspace(cfg.arm_bend_at_min, cfg.arm_bend_at_max, int(math.ceil(
                 (cfg.arm_bend_at_max - cfg.arm_bend_at_min) / 5.0)) + 1)
+            self.bend_grid = np.array([(b, at) for b in np.linspace(-mb, mb, 2 * nb + 1) if b != 0.0
+                                       for at in ats] + [(0.0, 0.0)])
         self.log_floor = log_floor_table(
             cfg.clutter_floor, cfg.cut_sigma2 + cfg.lane_norm * math.log(cfg.max_lanes) + 1.0)
 

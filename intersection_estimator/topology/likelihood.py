@@ -136,25 +136,9 @@ def arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa, at, cb, s
     py = oy[i] - cy
     s = px * ux + py * uy
     t = py * ux - px * uy
+    c = hx[i] * ux + hy[i] * uy
     if sb != 0.0:
-        return _bent_frame(i, s, t, ux, uy, ts, hx, hy, has_o, dcls, isa, at, cb, sb)
-    e = 0.0
-    if has_o[i]:
-        c = hx[i] * ux + hy[i] * uy
-        d = 1.0 if c < 0.0 else -1.0
-        e = isa[i] * 2.0 * (1.0 - abs(c))
-    else:
-        d = dcls[i]
-        if d == 0.0:
-            d = 1.0 if t * ts > 0.0 else -1.0
-    return s, t, d, e
-
-
-@njit(cache=True, fastmath=True, inline='always')
-def _bent_frame(i, s, t, ux, uy, ts, hx, hy, has_o, dcls, isa, at, cb, sb):
-    """:func:`arm_frame` of observation ``i`` (at ``s``, ``t`` on the straight axis) on
-    an arm that bends (kept apart so that the straight arm's code stays as it was)."""
-    s, t, c = unbend(s, t, hx[i] * ux + hy[i] * uy, hy[i] * ux - hx[i] * uy, at, cb, sb)
+        s, t, c = unbend(s, t, c, hy[i] * ux - hx[i] * uy, at, cb, sb)
     e = 0.0
     if has_o[i]:
         d = 1.0 if c < 0.0 else -1.0
@@ -202,6 +186,18 @@ def arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, out):
 
 
 @njit(cache=True, fastmath=True, inline='always')
+def _closest_lane(s, t, d, e, hg, nin, nout, w, ts, isp, inv_n_in, inv_n_out):
+    """(energy, lane-count normalisation) of an observation at along-arm ``s``, lateral
+    ``t``, direction ``d``, angle energy ``e`` under its closest lane of that direction
+    (behind the ray start: the distance to the start)."""
+    nl = nin if d > 0.0 else nout
+    q = d * ts * t - hg
+    dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
+    sn = min(s, 0.0)
+    return e + isp * (sn * sn + dl * dl), (inv_n_in if d > 0.0 else inv_n_out)
+
+
+@njit(cache=True, fastmath=True, inline='always')
 def _straight_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out,
                        ox, oy, hx, hy, has_o, dcls, isp, isa, out, energy):
     """First pass of :func:`arm_column_into` on a straight arm: per observation the energy
@@ -216,12 +212,8 @@ def _straight_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out
         dd = dcls[i] if dcls[i] != 0.0 else side
         d = (1.0 if c < 0.0 else -1.0) if has_o[i] else dd
         e = isa[i] * 2.0 * (1.0 - abs(c)) if has_o[i] else 0.0
-        nl = nin if d > 0.0 else nout
-        q = d * ts * t - hg
-        dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
-        sn = min(s, 0.0)
-        energy[i] = e + isp[i] * (sn * sn + dl * dl)
-        out[i] = inv_n_in if d > 0.0 else inv_n_out
+        energy[i], out[i] = _closest_lane(s, t, d, e, hg, nin, nout, w, ts, isp[i],
+                                          inv_n_in, inv_n_out)
 
 
 @njit(cache=True, fastmath=True, inline='always')
@@ -231,12 +223,8 @@ def _bent_energies(cx, cy, ux, uy, hg, nin, nout, w, ts, inv_n_in, inv_n_out, at
     for i in range(ox.shape[0]):
         s, t, d, e = arm_frame(i, cx, cy, ux, uy, ts, ox, oy, hx, hy, has_o, dcls, isa,
                                at, cb, sb)
-        nl = nin if d > 0.0 else nout
-        q = d * ts * t - hg
-        dl = q - (min(max(math.floor(q / w), 0.0), nl - 1.0) + 0.5) * w
-        sn = min(s, 0.0)
-        energy[i] = e + isp[i] * (sn * sn + dl * dl)
-        out[i] = inv_n_in if d > 0.0 else inv_n_out
+        energy[i], out[i] = _closest_lane(s, t, d, e, hg, nin, nout, w, ts, isp[i],
+                                          inv_n_in, inv_n_out)
 
 
 @njit(cache=True, fastmath=True)

@@ -44,15 +44,15 @@ def refit_chain(post: Posterior, c: Chain, sweeps: int) -> None:
                       t.log_floor)
         if t.P[P_BEND_MAX] > 0.0:
             for k in range(int(c.S[NARMS])):
-                refit_bend(c.S, k, t.P, *post.obs.kernel_args(), c.C, t.bends, t.bend_ats)
+                refit_bend(c.S, k, t.P, *post.obs.kernel_args(), c.C, t.bend_grid)
     post.rescore(c)
 
 
 @njit(cache=True, nogil=True)
-def refit_bend(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, bends, ats):
-    """Arm ``k``'s bend (:mod:`.arm_bend`) jumps to the best point of the grid ``bends``
-    x ``ats`` (and straight), the rest of ``S`` fixed: every point scored exactly (its
-    column against the other arms' ``C``, plus the bend's Laplace prior), the current
+def refit_bend(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, grid):
+    """Arm ``k``'s bend (:mod:`.arm_bend`) jumps to the best ``(bend, place)`` row of
+    ``grid`` (:class:`.config.Tables`), the rest of ``S`` fixed: every point scored exactly
+    (its column against the other arms' ``C``, plus the bend's Laplace prior), the current
     bend kept unless a point beats it. ``S`` and ``C[k]`` are changed in place. A random
     walk of the angle takes hundreds of accepted steps to reach a 30 deg bend; the grid
     finds it in one pass (like :func:`refit_arm` for the lane counts)."""
@@ -63,15 +63,12 @@ def refit_bend(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, bends, at
     col = np.empty(ox.shape[0])
     best = combine(C, n, -1, C[0], False, wts, floor) - ib * abs(S[i0 + BEND])
     bb, ba = S[i0 + BEND], S[i0 + BENDAT]
-    for j in range(bends.shape[0] + 1):
-        beta = bends[j] if j < bends.shape[0] else 0.0
-        for q in range(ats.shape[0] if beta != 0.0 else 1):
-            S[i0 + BEND] = beta
-            S[i0 + BENDAT] = ats[q] if beta != 0.0 else 0.0
-            arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
-            v = combine(C, n, k, col, True, wts, floor) - ib * abs(beta)
-            if v > best:
-                best, bb, ba = v, S[i0 + BEND], S[i0 + BENDAT]
+    for r in range(grid.shape[0]):
+        S[i0 + BEND], S[i0 + BENDAT] = grid[r, 0], grid[r, 1]
+        arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
+        v = combine(C, n, k, col, True, wts, floor) - ib * abs(grid[r, 0])
+        if v > best:
+            best, bb, ba = v, grid[r, 0], grid[r, 1]
     S[i0 + BEND] = bb
     S[i0 + BENDAT] = ba
     arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, C[k])
