@@ -1,5 +1,11 @@
 """Arm refit (beyond the paper): one arm's (gap, width, lane counts) jump to the best grid point.
 
+With the arm-axis offset on (:mod:`.arm_offset`, tracked windows) the grid spans the offset
+too: each driving direction's lanes start at their own distance from the axis, gap and
+offset are the sum and difference of the two (:func:`_search_gap_offset_width`). On the
+SUMO family about half of the wrong lane counts had a better-scoring right count that only
+fitted with the axis moved sideways, out of reach of one random-walk move.
+
 Single moves (:mod:`.moves`) rarely reach a joint change of lane count and width, so every
 ``refit_every`` samples, after the polish phase of a new chain, and for every lane
 candidate of the descent (:mod:`.descent`) each arm is refitted with center and angles
@@ -22,8 +28,9 @@ from numba import njit
 
 from .likelihood import arm_column, arm_frame, combine
 from .mcmc import Posterior
-from .state import (ANG, BEND, BENDAT, GAP, HDR, NARMS, NIN, NOUT, P_BEND_MAX, P_BEND_SCALE,
-                    P_D2_CUT, P_FLOOR, P_GAP_MAX,
+from .arm_offset import offset_on
+from .state import (ANG, BEND, BENDAT, GAP, HDR, NARMS, NIN, NOUT, OFF, P_BEND_MAX, P_BEND_SCALE,
+                    P_D2_CUT, P_FLOOR, P_GAP_MAX, P_OFF_LAPLACE, P_OFF_MAX, P_OFF_SIGMA,
                     P_LANE_NORM, P_LANE_SUM, P_MAX_LANES, P_MIN_LANES, P_TRAFFIC, P_W_MAX,
                     STRIDE, WID, Chain, arm_origin)
 
@@ -136,12 +143,13 @@ FAST_FINITE = {'nsz', 'arcp', 'contract', 'afn', 'reassoc'}
 
 
 @njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
-def _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C):
+def _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, extra=0.0):
     """The observations arm ``k`` of ``S`` can explain at all (the other arms add a constant
     to every candidate), packed per driving direction (side 0 entering) in
     ``R[side, :, :nrel[side]]``: lateral offset, base energy, 1/(2 sigma^2), weight, the
     other arms' best density o, log(o + floor), the energy cut (beyond it this arm cannot
     beat o: the closest lane's density exp(-e) / n**beta <= exp(-e)) and -log(o).
+    ``extra`` widens the lateral reach (the offset search moves the lanes sideways).
     Returns ``(R, nrel)``."""
     n = int(S[2])
     nobs = ox.shape[0]
@@ -170,7 +178,7 @@ def _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C):
             if j != k and C[j, i] > m:
                 m = C[j, i]
         other[i] = m
-    reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX]
+    reach = 0.5 * P[P_GAP_MAX] + P[P_MAX_LANES] * P[P_W_MAX] + extra
     R = np.empty((2, 8, nobs))
     nrel = np.zeros(2, np.int64)
     for i in range(nobs):
@@ -274,12 +282,23 @@ def _count_tables(P, FT):
     return invn, blog
 
 
+@njit(cache=True, nogil=True, inline='always')
+def _off_prior(o, P):
+    """One arm's axis-offset log prior up to its constant (:func:`.arm_offset.offset_log_prior`)."""
+    if not offset_on(P):
+        return 0.0
+    if P[P_OFF_LAPLACE] > 0.0:
+        return -abs(o) / P[P_OFF_SIGMA]
+    return -0.5 * o * o / (P[P_OFF_SIGMA] * P[P_OFF_SIGMA])
+
+
 @njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
 def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, col,
-                    bg, bw, bi, bo):
-    """Arm ``k`` of ``S`` set to (gap ``bg``, width ``bw``, counts ``bi``, ``bo``) if that
-    scores no worse exactly (else left as it was); ``col`` its column after. Returns
-    (posterior after, posterior before, log-likelihood after) up to the other arms' prior."""
+                    bg, bw, bi, bo, boff):
+    """Arm ``k`` of ``S`` set to (gap ``bg``, width ``bw``, counts ``bi``, ``bo``, axis
+    offset ``boff``) if that scores no worse exactly (else left as it was); ``col`` its
+    column after. Returns (posterior after, posterior before, log-likelihood after) up to
+    the other arms' prior."""
     n = int(S[2])
     floor = P[P_FLOOR]
     i0 = HDR + k * STRIDE
@@ -288,14 +307,15 @@ def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, 
         old[q] = S[i0 + q]
     arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
     ll_cur = combine(C, n, k, col, True, wts, floor)
-    cur = ll_cur + logPn[int(old[NIN])] + logPn[int(old[NOUT])]
+    cur = ll_cur + logPn[int(old[NIN])] + logPn[int(old[NOUT])] + _off_prior(old[OFF], P)
     S[i0 + GAP] = bg
     S[i0 + WID] = bw
     S[i0 + NIN] = bi
     S[i0 + NOUT] = bo
+    S[i0 + OFF] = boff
     arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
     ll_new = combine(C, n, k, col, True, wts, floor)
-    new = ll_new + logPn[int(bi)] + logPn[int(bo)]
+    new = ll_new + logPn[int(bi)] + logPn[int(bo)] + _off_prior(boff, P)
     if new < cur:
         for q in range(STRIDE):
             S[i0 + q] = old[q]
@@ -304,11 +324,127 @@ def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, 
     return new, cur, ll_new
 
 
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
+def _count_range(S, i0, side, lo, hi, fixed_counts):
+    if fixed_counts:
+        n = int(S[i0 + NIN]) if side == 0 else int(S[i0 + NOUT])
+        return n, n
+    return lo, hi
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
+def _best_count(acc, n_lo, n_hi, lo):
+    """(best score, its lane count) of ``acc[n_lo..n_hi]`` (ties: the fewest lanes; all
+    ``-inf``: ``lo``, the smallest count allowed)."""
+    sbest = -np.inf
+    sn = lo
+    for nl in range(n_lo, n_hi + 1):
+        if acc[nl] > sbest:
+            sbest = acc[nl]
+            sn = nl
+    return sbest, sn
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
+def _search_gap_width(S, i0, R, nrel, P, logPn, blog, invn, FT, gaps, widths, lo, hi,
+                      fixed_counts, acc):
+    """Best (gap, width, n_in, n_out) over the grids, the axis offset fixed."""
+    ng = gaps.shape[0] + 1
+    nw = widths.shape[0] + 1
+    best = -np.inf
+    bg, bw, bi, bo = S[i0 + GAP], S[i0 + WID], S[i0 + NIN], S[i0 + NOUT]
+    for gi in range(ng):
+        g = gaps[gi] if gi < ng - 1 else S[i0 + GAP]
+        for wi in range(nw):
+            w = widths[wi] if wi < nw - 1 else S[i0 + WID]
+            tot = 0.0
+            ni = no = lo
+            for side in range(2):
+                n_lo, n_hi = _count_range(S, i0, side, lo, hi, fixed_counts)
+                _side_scores(R, nrel, side, g, w, n_lo, n_hi, P, logPn, blog, invn, FT, acc)
+                sbest, sn = _best_count(acc, n_lo, n_hi, lo)
+                tot += sbest
+                if side == 0:
+                    ni = sn
+                else:
+                    no = sn
+            if tot > best:
+                best, bg, bw, bi, bo = tot, g, w, ni, no
+    return bg, bw, bi, bo
+
+
+@njit(cache=True, nogil=True, fastmath=FAST_FINITE)
+def _search_gap_offset_width(S, i0, R, nrel, P, logPn, blog, invn, FT, widths, lo, hi,
+                             fixed_counts, acc):
+    """Best (gap, width, n_in, n_out, axis offset) over a grid (beyond the paper).
+
+    Given the width, a driving direction's lanes start at ``h = gap / 2 + ts (o - o_c)``
+    (entering) or ``gap / 2 - ts (o - o_c)`` (leaving) from the current axis (offset
+    ``o_c``): its score depends on its own ``h`` only (:func:`_side_scores` with gap
+    ``2 h``). So each side is scored once per ``h`` of a grid, and every pair ``(h_in,
+    h_out)`` -- gap ``h_in + h_out`` in ``[0, gap_max]``, offset ``o_c + ts (h_in - h_out) / 2``
+    within the bound -- is a sum of two table entries plus the offset's prior. A lane count
+    that only fits once the axis moves sideways (an arm beside the center) is found in one
+    pass, where the random walk must move offset, gap and count together."""
+    ts = P[P_TRAFFIC]
+    oc = S[i0 + OFF]
+    omax = P[P_OFF_MAX]
+    gmax = P[P_GAP_MAX]
+    span = omax + abs(oc)
+    nh0 = int(math.ceil((0.5 * gmax + 2.0 * span) / _H_STEP)) + 1
+    H = np.empty(nh0 + 1)
+    for q in range(nh0):
+        H[q] = -span + q * _H_STEP
+    H[nh0] = 0.5 * S[i0 + GAP]           # the current state is a candidate
+    nh = nh0 + 1
+    nw = widths.shape[0] + 1
+    sc = np.empty((2, nh))
+    sn = np.empty((2, nh), np.int64)
+    best = -np.inf
+    bg, bw, bi, bo, boff = S[i0 + GAP], S[i0 + WID], S[i0 + NIN], S[i0 + NOUT], oc
+    for wi in range(nw):
+        w = widths[wi] if wi < nw - 1 else S[i0 + WID]
+        for side in range(2):
+            n_lo, n_hi = _count_range(S, i0, side, lo, hi, fixed_counts)
+            for q in range(nh):
+                _side_scores(R, nrel, side, 2.0 * H[q], w, n_lo, n_hi, P, logPn, blog, invn,
+                             FT, acc)
+                sc[side, q], sn[side, q] = _best_count(acc, n_lo, n_hi, lo)
+        for a in range(nh):
+            for b in range(nh):
+                g = H[a] + H[b]
+                o = oc + ts * 0.5 * (H[a] - H[b])
+                if g < -1e-9 or g > gmax + 1e-9 or abs(o) > omax + 1e-9:
+                    continue
+                tot = sc[0, a] + sc[1, b] + _off_prior(o, P)
+                if tot > best:
+                    best, bg, bw, bi, bo, boff = tot, max(g, 0.0), w, sn[0, a], sn[1, b], o
+    return bg, bw, bi, bo, boff
+
+
+@njit(cache=True, nogil=True)
+def _directions_known(has_o, dcls):
+    """Does every observation carry its driving direction (an orientation or a Doppler
+    class)? One without takes its side of the median from the axis (:func:`.likelihood.arm_frame`),
+    which the offset moves: then the two directions no longer separate."""
+    for i in range(has_o.shape[0]):
+        if not has_o[i] and dcls[i] == 0.0:
+            return False
+    return True
+
+
+#: grid step of a side's lane start in :func:`_search_gap_offset_width` [m]
+_H_STEP = 0.5
+
+
 @njit(cache=True, nogil=True, fastmath=FAST_FINITE)
 def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gaps, widths, FT,
               fixed_counts=False):
     """Best (gap, width, lanes_in, lanes_out) of arm ``k`` with center and angles fixed
-    (with ``fixed_counts``: best gap and width for the lane counts in ``S``).
+    (with ``fixed_counts``: best gap and width for the lane counts in ``S``); with the arm
+    axis offset on (:mod:`.arm_offset`) and every observation's direction known (tracked
+    windows, where the offset is on by default), the offset too
+    (:func:`_search_gap_offset_width`).
 
     Deterministic coordinate ascent on the posterior (initialisation aid, beyond the
     paper): candidates are the grids ``gaps`` x ``widths`` plus the current values; for
@@ -323,49 +459,20 @@ def refit_arm(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, gap
     lo = int(P[P_MIN_LANES])
     hi = int(P[P_MAX_LANES])
     invn, blog = _count_tables(P, FT)
-    R, nrel = _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C)
     acc = np.empty(hi + 1)
-    ng = gaps.shape[0] + 1
-    nw = widths.shape[0] + 1
-    best = -np.inf
-    bg = S[i0 + GAP]
-    bw = S[i0 + WID]
-    bi = S[i0 + NIN]
-    bo = S[i0 + NOUT]
-    ni = lo
-    no = lo
-    for gi in range(ng):
-        g = gaps[gi] if gi < ng - 1 else S[i0 + GAP]
-        for wi in range(nw):
-            w = widths[wi] if wi < nw - 1 else S[i0 + WID]
-            tot = 0.0
-            for side in range(2):
-                n_lo = lo
-                n_hi = hi
-                if fixed_counts:
-                    n_lo = int(S[i0 + NIN]) if side == 0 else int(S[i0 + NOUT])
-                    n_hi = n_lo
-                _side_scores(R, nrel, side, g, w, n_lo, n_hi, P, logPn, blog, invn, FT, acc)
-                sbest = -np.inf
-                sn = lo
-                for nl in range(n_lo, n_hi + 1):
-                    if acc[nl] > sbest:
-                        sbest = acc[nl]
-                        sn = nl
-                tot += sbest
-                if side == 0:
-                    ni = sn
-                else:
-                    no = sn
-            if tot > best:
-                best = tot
-                bg = g
-                bw = w
-                bi = ni
-                bo = no
+    if offset_on(P) and _directions_known(has_o, dcls):
+        R, nrel = _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C,
+                            P[P_OFF_MAX] + abs(S[i0 + OFF]))
+        bg, bw, bi, bo, boff = _search_gap_offset_width(S, i0, R, nrel, P, logPn, blog, invn,
+                                                        FT, widths, lo, hi, fixed_counts, acc)
+    else:
+        R, nrel = _relevant(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C)
+        bg, bw, bi, bo = _search_gap_width(S, i0, R, nrel, P, logPn, blog, invn, FT, gaps,
+                                           widths, lo, hi, fixed_counts, acc)
+        boff = S[i0 + OFF]
     col = np.empty(ox.shape[0])
     new, cur, _ = _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts,
-                                  C, col, bg, bw, bi, bo)
+                                  C, col, bg, bw, bi, bo, boff)
     C[k, :] = col
     return new - cur
 
@@ -423,4 +530,5 @@ def refit_lane_steps(S, k, counts, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, i
         out_S[c, i0 + NIN] = counts[c, 0]
         out_S[c, i0 + NOUT] = counts[c, 1]
         _keep_if_better(out_S[c], k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C,
-                        out_col[c], choice[c, 0], choice[c, 1], choice[c, 2], choice[c, 3])
+                        out_col[c], choice[c, 0], choice[c, 1], choice[c, 2], choice[c, 3],
+                        S[i0 + OFF])

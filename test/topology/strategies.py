@@ -44,12 +44,14 @@ def states(draw, max_offset=0.0, max_bend_deg=0.0):
     return S
 
 
-def random_obs(rng, n, center=(0.0, 0.0), spread=60.0):
+def random_obs(rng, n, center=(0.0, 0.0), spread=60.0, known_direction=False):
+    """``n`` observations of random place, orientation (half of them) and Doppler class (with
+    ``known_direction`` never 0, the unknown class)."""
     xy = np.asarray(center) + rng.uniform(-spread, spread, (n, 2))
     h = rng.uniform(-math.pi, math.pi, n)
     has_o = rng.uniform(size=n) < 0.5
     return ObservationSet(xy[:, 0].copy(), xy[:, 1].copy(), np.where(has_o, np.cos(h), 0.0),
                           np.where(has_o, np.sin(h), 0.0), has_o,
-                          rng.choice([1.0, -1.0, 0.0], n),
+                          rng.choice([1.0, -1.0] if known_direction else [1.0, -1.0, 0.0], n),
                           rng.uniform(0.5, 5.0, n), rng.uniform(0.3, 2.0, n),
                           rng.uniform(0.05, 0.5, n))

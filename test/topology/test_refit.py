@@ -10,45 +10,69 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.likelihood import full_loglik
-from intersection_estimator.topology.mcmc import Posterior
-from intersection_estimator.topology.prior import log_prior
+from intersection_estimator.topology.mcmc import Posterior, state_log_prior
 from intersection_estimator.topology.refit import (LOG_FLOOR_INV_STEP, log_floor_table,
                                                    refit_arm, refit_chain, refit_gap_width,
                                                    refit_lane_candidates)
-from intersection_estimator.topology.state import (GAP, HDR, MAXA, NIN, NOUT, STRIDE, WID, Chain,
-                                                   pack_state)
+from intersection_estimator.topology.state import (GAP, HDR, MAXA, NIN, NOUT, OFF, STRIDE, WID,
+                                                   Chain, pack_state)
 from reference.likelihood import log_likelihood_reference
 
 from .scenes import EASY, easy_intersection, scene
 from .strategies import random_obs, states
 
 
+def _refit_candidates(S, i0, tab, cfg, fixed, known):
+    """Every (gap, width, n_in, n_out, offset) refit_arm may choose: with the offset off the
+    gap x width grids plus the current values; with it on, every pair of lane starts
+    ``(h_in, h_out)`` of its grid (gap ``h_in + h_out``, offset ``o + ts (h_in - h_out) / 2``
+    within the bounds) -- when every observation's direction is ``known``."""
+    counts = ([(S[i0 + NIN], S[i0 + NOUT])] if fixed else
+              list(itertools.product(range(cfg.min_lanes, cfg.max_lanes + 1), repeat=2)))
+    widths = np.r_[tab.widths, S[i0 + WID]]
+    oc = S[i0 + OFF]
+    if cfg.arm_offset_max <= 0 or not known:
+        pairs = [(g, oc) for g in np.r_[tab.gaps, S[i0 + GAP]]]
+    else:
+        span = cfg.arm_offset_max + abs(oc)
+        n = int(math.ceil((0.5 * cfg.gap_max + 2 * span) / 0.5)) + 1
+        H = np.r_[-span + 0.5 * np.arange(n), 0.5 * S[i0 + GAP]]
+        pairs = [(a + b, oc + 0.5 * (a - b)) for a in H for b in H     # ts = +1 (right-hand)
+                 if -1e-9 <= a + b <= cfg.gap_max + 1e-9
+                 and abs(oc + 0.5 * (a - b)) <= cfg.arm_offset_max + 1e-9]
+    for (ni, no), (g, o), w in itertools.product(counts, pairs, widths):
+        yield max(g, 0.0), w, ni, no, o
+
+
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(states(), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5]), st.booleans(),
-       st.booleans())
+@given(states(max_offset=3.0), st.integers(0, 10 ** 6), st.sampled_from([0.0, 0.5]),
+       st.booleans(), st.booleans(), st.sampled_from([0.0, 6.0]), st.booleans())
 def test_refit_arm_finds_the_best_grid_point_of_the_reference_posterior(S, seed, lane_norm,
-                                                                        lane_sum, fixed):
+                                                                        lane_sum, fixed, omax,
+                                                                        known):
     """refit_arm (compiled, relative log-densities) picks the (gap, width, lane counts) of
-    arm k that maximise the plain reference posterior over its grid (with ``fixed``: the
-    best gap and width for the counts already there)."""
+    arm k -- with the axis offset on, the offset too -- that maximise the plain reference
+    posterior over its grid (with ``fixed``: the best for the counts already there). The
+    offset is searched only when every observation's direction is ``known``."""
     rng = np.random.default_rng(seed)
-    obs = random_obs(rng, 80, center=S[:2], spread=30.0)
-    cfg = TopologyConfig(lane_norm=lane_norm, lane_sum=lane_sum, cut_sigma2=700.0)
+    obs = random_obs(rng, 80, center=S[:2], spread=30.0, known_direction=known)
+    cfg = TopologyConfig(lane_norm=lane_norm, lane_sum=lane_sum, cut_sigma2=700.0,
+                         arm_offset_max=omax)
+    if omax == 0.0:
+        S = S.copy()
+        S[HDR + OFF::STRIDE][:int(S[2])] = 0.0
     tab = Tables(cfg)
     k = int(rng.integers(0, int(S[2])))
     i0 = HDR + k * STRIDE
 
     def lpost(T):
         return (log_likelihood_reference(T, obs, tab.P)
-                + float(log_prior(T, tab.logPA, tab.logPn, tab.arm_const)))
+                + float(state_log_prior(T, tab.P, tab.logPA, tab.logPn, tab.arm_const)))
 
     best = -math.inf
-    counts = ([(S[i0 + NIN], S[i0 + NOUT])] if fixed else
-              itertools.product(range(cfg.min_lanes, cfg.max_lanes + 1), repeat=2))
-    for (ni, no), g, w in itertools.product(list(counts), np.r_[tab.gaps, S[i0 + GAP]],
-                                            np.r_[tab.widths, S[i0 + WID]]):
+    for g, w, ni, no, o in _refit_candidates(S, i0, tab, cfg, fixed, known):
         T = S.copy()
-        T[i0 + GAP], T[i0 + WID], T[i0 + NIN], T[i0 + NOUT] = g, w, ni, no
+        T[i0 + GAP], T[i0 + WID], T[i0 + NIN], T[i0 + NOUT], T[i0 + OFF] = g, w, ni, no, o
         best = max(best, lpost(T))
     R = S.copy()
     C = np.zeros((MAXA, len(obs)))
@@ -58,6 +82,25 @@ def test_refit_arm_finds_the_best_grid_point_of_the_reference_posterior(S, seed,
     assert lpost(R) == pytest.approx(best, abs=1e-6)
     if fixed:
         assert (R[i0 + NIN], R[i0 + NOUT]) == (S[i0 + NIN], S[i0 + NOUT])
+
+
+def test_refit_arm_moves_the_axis_of_an_arm_beside_the_center():
+    """An arm whose lanes run 3 m beside the center (an offset arm): with the axis offset
+    on, one refit from the straight-through state finds its offset and lane counts; the
+    gap-width grid alone (offset off) cannot reach them."""
+    import copy
+    gt = copy.deepcopy(EASY[1])
+    gt.arms[1].offset, gt.arms[1].lanes_in, gt.arms[1].gap = 3.0, 2, 0.5
+    start = copy.deepcopy(gt)
+    start.arms[1].offset, start.arms[1].lanes_in, start.arms[1].gap = 0.0, 3, 0.5
+    for omax, found in ((6.0, True), (0.0, False)):
+        cfg = TopologyConfig(arm_offset_max=omax)
+        post, c = _chain_on_scene(cfg, gt, start)
+        i0 = HDR + STRIDE
+        refit_arm(c.S, 1, post.t.P, post.t.logPn, *post.obs.kernel_args(), c.C, post.t.gaps,
+                  post.t.widths, post.t.log_floor)
+        got = (int(c.S[i0 + NIN]), round(float(c.S[i0 + OFF]) * 2) / 2)
+        assert (got == (2, 3.0)) is found, (omax, got)
 
 
 @pytest.mark.parametrize('floor', [0.01, 0.2])
