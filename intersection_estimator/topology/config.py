@@ -10,7 +10,7 @@ parameters. What was tried and measured for the defaults: ``docs/tuning.md``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, make_dataclass
+from dataclasses import dataclass, field, fields, make_dataclass, replace
 import math
 
 import numpy as np
@@ -63,6 +63,8 @@ RANGES = {
     'min_lanes': ('[1, max_lanes]', 'fewest lanes per driving direction (no one-way roads)'),
     'max_lanes': ('[min_lanes, inf)', 'most lanes per driving direction'),
     'gap_max': ('(0, 30]', 'widest median gap [m]'),
+    'gap_max_tracked': ('[0, 30]', 'widest median gap for windows with tracked objects, where it '
+                        'also spans the lanes of a direction no vehicle drove (0: gap_max) [m]'),
     'arm_offset_max': ('[0, 30]', 'largest sideways offset of an arm axis from the center '
                        '(0: arms are rays from the center, paper §II-B) [m]'),
     'arm_offset_sigma': ('(0, 30]', 'sigma (normal) or scale (Laplace) of the prior of an arm-axis '
@@ -212,6 +214,7 @@ class TopologyConfig:
     min_lanes: int = 1
     max_lanes: int = 6
     gap_max: float = 4.0
+    gap_max_tracked: float = 8.0
     arm_offset_max: float = 6.0
     arm_offset_sigma: float = 1.0
     arm_offset_prior: str = 'laplace'
@@ -316,6 +319,19 @@ class TopologyConfig:
               'non-negative probabilities with mass on [min_lanes, max_lanes]')
         _check_flags(self)
         check_labels(self, 'weak_labels')
+        return self
+
+    def for_tracks(self) -> 'TopologyConfig':
+        """The model for windows with tracked objects: ``gap_max_tracked`` as the gap bound."""
+        if self.gap_max_tracked <= 0.0 or self.gap_max_tracked == self.gap_max:
+            return self
+        return replace(self, gap_max=self.gap_max_tracked)
+
+    def for_voxels(self) -> 'TopologyConfig':
+        """The model for windows without tracked objects: no axis offset or bend when
+        ``arm_offset_tracks_only``."""
+        if (self.offset_on or self.bend_on) and self.arm_offset_tracks_only:
+            return replace(self, arm_offset_max=0.0, arm_bend_max_deg=0.0)
         return self
 
     @property

@@ -19,7 +19,6 @@ estimate leaves out arms without support (:mod:`.support`).
 
 from __future__ import annotations
 
-from dataclasses import replace
 import math
 import time
 
@@ -35,7 +34,8 @@ from .mcmc import Posterior, acceptance_rates, new_work, temperatures
 from .moves import MOVE_NAMES
 from .preprocess import preprocess, radar_rows
 from .refit import refit_chain
-from .state import BEND, CX, CY, HDR, MAXA, OFF, STRIDE, Chain, arm_angles, pack_state, unpack_state
+from .state import (BEND, CX, CY, GAP, HDR, MAXA, OFF, P_GAP_MAX, P_OFF_MAX, STRIDE, Chain,
+                    arm_angles, pack_state, unpack_state)
 from .support import reported
 
 __all__ = ['TopologyEstimator']
@@ -56,13 +56,11 @@ class TopologyEstimator:
         #: slower, the samples are the same)
         self.audit = bool(audit)
         self._rng = _as_rng(seed)
-        self._tables_all = Tables(self.cfg)
-        #: the tables without the arm-axis offset, for windows without tracked objects
-        #: when ``arm_offset_tracks_only`` (:mod:`.arm_offset`)
-        self._tables_plain = (Tables(replace(self.cfg, arm_offset_max=0.0, arm_bend_max_deg=0.0))
-                              if ((self.cfg.offset_on or self.cfg.bend_on)
-                                  and self.cfg.arm_offset_tracks_only)
-                              else self._tables_all)
+        #: the tables for windows with tracked objects (``gap_max_tracked``) and without
+        #: them (no arm-axis offset when ``arm_offset_tracks_only``, :mod:`.arm_offset`)
+        tracked, plain = self.cfg.for_tracks(), self.cfg.for_voxels()
+        self._tables_all = Tables(tracked)
+        self._tables_plain = self._tables_all if plain == tracked else Tables(plain)
         self._pcfg = self.cfg.preprocess_config()
         self.reset()
 
@@ -250,12 +248,16 @@ class TopologyEstimator:
         return Posterior(self._tables, obs, self.work['chain'], self.audit)
 
     def _drop_offsets(self) -> None:
-        """Arms through the center again (the window lost its tracked objects, so the
-        offset is no longer part of the model, ``arm_offset_tracks_only``)."""
+        """Arms through the center again and gaps within ``gap_max`` (the window lost its
+        tracked objects: the model is that of :meth:`.TopologyConfig.for_voxels`)."""
+        gmax = self._tables_plain.P[P_GAP_MAX]
         for c in self._chains:
             for S in (c.S, c.best_S):
-                S[HDR + OFF:HDR + MAXA * STRIDE:STRIDE] = 0.0
-                S[HDR + BEND:HDR + MAXA * STRIDE:STRIDE] = 0.0
+                if not self._tables_plain.P[P_OFF_MAX] > 0.0:
+                    S[HDR + OFF:HDR + MAXA * STRIDE:STRIDE] = 0.0
+                    S[HDR + BEND:HDR + MAXA * STRIDE:STRIDE] = 0.0
+                g = S[HDR + GAP:HDR + MAXA * STRIDE:STRIDE]
+                np.minimum(g, gmax, out=g)
 
     @property
     def _tables(self) -> Tables:

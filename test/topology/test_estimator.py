@@ -148,3 +148,27 @@ def test_converged_state_after_enough_samples():
     est.set_observations(scene(EASY[0], 'tracked', seed=0))
     est.run(n_samples=8000)
     assert est.state == 'CONVERGED'
+
+
+def test_tracked_windows_take_the_wide_gap_and_voxel_windows_clamp_it():
+    """``gap_max_tracked``: a window with tracked objects samples median gaps up to it (a
+    wide median, or the lanes of a direction no vehicle drove); the straight-lane truth of
+    a 6 m median is found. A window that loses its tracks takes ``gap_max`` again and every
+    chain's gap is clamped to it. Bounded at 4 m, the same data get extra lanes."""
+    from intersection_estimator.topology.state import P_GAP_MAX
+    from .scenes import easy_intersection, same_topology, scene
+    inter = easy_intersection(4, lanes=((1, 1), (2, 1), (1, 2), (1, 1)), gap=6.0)
+    est = TopologyEstimator(TopologyConfig(gap_max=4.0, gap_max_tracked=8.0), seed=1)
+    est.set_observations(scene(inter, 'tracked', seed=3))
+    assert est._tables.P[P_GAP_MAX] == 8.0
+    est.run(n_samples=4000)
+    assert same_topology(inter, est.best, tol_deg=5.0), est.best
+    assert sum(a.gap > 4.0 for a in est.best.arms) >= 3
+    est.set_observations(scene(inter, 'raw', seed=3))
+    assert est._tables.P[P_GAP_MAX] == 4.0
+    assert all(a.gap <= 4.0 for a in est.best.arms)
+    assert TopologyConfig(gap_max_tracked=0.0).for_tracks().gap_max == 4.0
+    narrow = TopologyEstimator(TopologyConfig(gap_max=4.0, gap_max_tracked=0.0), seed=1)
+    narrow.set_observations(scene(inter, 'tracked', seed=3))
+    narrow.run(n_samples=4000)              # the 4 m bound fills the median with lanes
+    assert not same_topology(inter, narrow.best, tol_deg=5.0)
