@@ -92,10 +92,13 @@ def test_bad_convergence_parameter_refused_naming_it(field, value):
 
 def test_replay_of_the_tracked_bag_changes_state_rarely(monkeypatch, tmp_path):
     """bags/tracked (21 s, 106 ticks): the sampler's state changes ~35 times, the reported one
-    a few times (it holds CONVERGED over a stretch, and ends CONVERGED unless the lane counts
-    changed in the last ticks: the last vehicles complete a lane at tick ~94); the state is
-    derived after the fact (NO_DATA <=> no estimate); the final estimate is the truth's
-    topology."""
+    a few times (it holds CONVERGED over a stretch of >= 7 ticks, and ends CONVERGED unless
+    the lane counts changed in the last ticks: the last vehicles complete a lane at tick
+    ~94); the state is derived after the fact (NO_DATA <=> no estimate); the final estimate
+    is the truth's topology. (With the median gap up to 8 m for tracked windows one arm's
+    fourth leaving lane, which the final estimate and the truth have, appears at tick ~60
+    instead of later, so the first CONVERGED stretch ends after 7 ticks, not 16, before
+    two more arms gain a lane at ticks ~69 and ~76.)"""
     from intersection_estimator.replay import bundled_bag, replay
     seen = []
     tick = pipeline.OnlineEstimator.tick
@@ -112,7 +115,7 @@ def test_replay_of_the_tracked_bag_changes_state_rarely(monkeypatch, tmp_path):
     assert len(seen) > 100 and _flips(sampler) >= 20
     assert _flips(reported) <= 8
     runs = [(k, len(list(g))) for k, g in itertools.groupby(reported)]
-    assert max(n for k, n in runs if k == 'CONVERGED') >= 10
+    assert max(n for k, n in runs if k == 'CONVERGED') >= 7
     counts = [None if r.intersection is None else
               [(a.lanes_in, a.lanes_out) for a in r.intersection.arms] for r in seen]
     last_change = max(i for i in range(1, len(seen)) if counts[i] != counts[i - 1])
