@@ -46,8 +46,8 @@ from numba import njit
 
 from .state import HDR, OFF, P_OFF_LAPLACE, P_OFF_MAX, P_OFF_SIGMA, STRIDE
 
-__all__ = ['offset_on', 'offset_ok', 'draw_offset', 'offset_logq', 'offset_log_prior',
-           'offset_log_const']
+__all__ = ['offset_on', 'offset_ok', 'draw_offset', 'offset_logq', 'offset_arm_log_prior',
+           'offset_log_prior', 'offset_log_const']
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
@@ -86,22 +86,24 @@ def offset_ok(o, P) -> bool:
     return abs(o) <= P[P_OFF_MAX]
 
 
-@njit(cache=True)
-def offset_log_prior(S, P):
-    """sum over the arms of ``-o_k^2 / (2 sigma^2)``, or ``-|o_k| / sigma`` for the
-    Laplace prior (the constant: per arm, in :func:`offset_log_const`)."""
+@njit(cache=True, inline='always')
+def offset_arm_log_prior(o, P):
+    """One arm's term of :func:`offset_log_prior`: ``-o^2 / (2 sigma^2)``, or ``-|o| / sigma``
+    for the Laplace prior (0 when the offset is off)."""
     if not offset_on(P):
         return 0.0
-    lp = 0.0
     if P[P_OFF_LAPLACE] > 0.0:
-        ib = 1.0 / P[P_OFF_SIGMA]
-        for k in range(int(S[2])):
-            lp -= ib * abs(S[HDR + k * STRIDE + OFF])
-        return lp
-    iv = 0.5 / (P[P_OFF_SIGMA] * P[P_OFF_SIGMA])
+        return -(1.0 / P[P_OFF_SIGMA]) * abs(o)
+    return -(0.5 / (P[P_OFF_SIGMA] * P[P_OFF_SIGMA])) * o * o
+
+
+@njit(cache=True)
+def offset_log_prior(S, P):
+    """sum over the arms of :func:`offset_arm_log_prior` (the constant: per arm, in
+    :func:`offset_log_const`)."""
+    lp = 0.0
     for k in range(int(S[2])):
-        o = S[HDR + k * STRIDE + OFF]
-        lp -= iv * o * o
+        lp += offset_arm_log_prior(S[HDR + k * STRIDE + OFF], P)
     return lp
 
 

@@ -251,9 +251,10 @@ class TopologyEstimator:
         """Arms through the center again and gaps within ``gap_max`` (the window lost its
         tracked objects: the model is that of :meth:`.TopologyConfig.for_voxels`)."""
         gmax = self._tables_plain.P[P_GAP_MAX]
+        straight = not self._tables_plain.P[P_OFF_MAX] > 0.0
         for c in self._chains:
             for S in (c.S, c.best_S):
-                if not self._tables_plain.P[P_OFF_MAX] > 0.0:
+                if straight:
                     S[HDR + OFF:HDR + MAXA * STRIDE:STRIDE] = 0.0
                     S[HDR + BEND:HDR + MAXA * STRIDE:STRIDE] = 0.0
                 g = S[HDR + GAP:HDR + MAXA * STRIDE:STRIDE]

@@ -26,11 +26,11 @@ import math
 import numpy as np
 from numba import njit
 
+from .arm_offset import offset_arm_log_prior, offset_on
 from .likelihood import arm_column, arm_frame, combine
 from .mcmc import Posterior
-from .arm_offset import offset_on
 from .state import (ANG, BEND, BENDAT, GAP, HDR, NARMS, NIN, NOUT, OFF, P_BEND_MAX, P_BEND_SCALE,
-                    P_D2_CUT, P_FLOOR, P_GAP_MAX, P_OFF_LAPLACE, P_OFF_MAX, P_OFF_SIGMA,
+                    P_D2_CUT, P_FLOOR, P_GAP_MAX, P_OFF_MAX,
                     P_LANE_NORM, P_LANE_SUM, P_MAX_LANES, P_MIN_LANES, P_TRAFFIC, P_W_MAX,
                     STRIDE, WID, Chain, arm_origin)
 
@@ -282,16 +282,6 @@ def _count_tables(P, FT):
     return invn, blog
 
 
-@njit(cache=True, nogil=True, inline='always')
-def _off_prior(o, P):
-    """One arm's axis-offset log prior up to its constant (:func:`.arm_offset.offset_log_prior`)."""
-    if not offset_on(P):
-        return 0.0
-    if P[P_OFF_LAPLACE] > 0.0:
-        return -abs(o) / P[P_OFF_SIGMA]
-    return -0.5 * o * o / (P[P_OFF_SIGMA] * P[P_OFF_SIGMA])
-
-
 @njit(cache=True, nogil=True, fastmath=FAST_FINITE, inline='always')
 def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, C, col,
                     bg, bw, bi, bo, boff):
@@ -307,7 +297,8 @@ def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, 
         old[q] = S[i0 + q]
     arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
     ll_cur = combine(C, n, k, col, True, wts, floor)
-    cur = ll_cur + logPn[int(old[NIN])] + logPn[int(old[NOUT])] + _off_prior(old[OFF], P)
+    cur = (ll_cur + logPn[int(old[NIN])] + logPn[int(old[NOUT])]
+           + offset_arm_log_prior(old[OFF], P))
     S[i0 + GAP] = bg
     S[i0 + WID] = bw
     S[i0 + NIN] = bi
@@ -315,7 +306,7 @@ def _keep_if_better(S, k, P, logPn, ox, oy, hx, hy, has_o, dcls, isp, isa, wts, 
     S[i0 + OFF] = boff
     arm_column(S, k, P, ox, oy, hx, hy, has_o, dcls, isp, isa, col)
     ll_new = combine(C, n, k, col, True, wts, floor)
-    new = ll_new + logPn[int(bi)] + logPn[int(bo)] + _off_prior(boff, P)
+    new = ll_new + logPn[int(bi)] + logPn[int(bo)] + offset_arm_log_prior(boff, P)
     if new < cur:
         for q in range(STRIDE):
             S[i0 + q] = old[q]
@@ -416,7 +407,7 @@ def _search_gap_offset_width(S, i0, R, nrel, P, logPn, blog, invn, FT, widths, l
                 o = oc + ts * 0.5 * (H[a] - H[b])
                 if g < -1e-9 or g > gmax + 1e-9 or abs(o) > omax + 1e-9:
                     continue
-                tot = sc[0, a] + sc[1, b] + _off_prior(o, P)
+                tot = sc[0, a] + sc[1, b] + offset_arm_log_prior(o, P)
                 if tot > best:
                     best, bg, bw, bi, bo, boff = tot, max(g, 0.0), w, sn[0, a], sn[1, b], o
     return bg, bw, bi, bo, boff
