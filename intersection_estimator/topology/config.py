@@ -166,6 +166,9 @@ RANGES = {
                       'behind [nats]'),
     'descent_focus': ('[0, 1]', 'share of a lane candidate\'s arm moves on its changed arm'),
     'descent_top': ('[0, 1000]', 'only the best this many lane candidates get moves (0: all)'),
+    'descent_add_support': ('[0, inf)', 'the descent also tries an arm where trajectory parts of '
+                            'this many vehicle passages are explained by no arm (0: off; '
+                            'topology/unexplained.py)'),
     # anytime API
     'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
     'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),
@@ -292,6 +295,7 @@ class TopologyConfig:
     descent_prune: float = 3.0
     descent_focus: float = 0.8
     descent_top: int = 0
+    descent_add_support: float = 1.5
     # anytime API
     chunk: int = 500
     converge_window: int = 2000

@@ -6,11 +6,13 @@ detections: in ~3/4 of the wrong lane counts the true counts win once center and
 follow). From the MAP state, :func:`descend` tries every candidate of :func:`candidates`:
 one arm's lane counts changed by a step of :data:`DESCENT_STEPS` (that arm's gap and
 width then set to the best grid point, :func:`.refit.refit_gap_width`), or one arm
-removed. The lane candidates within ``descent_screen`` nats of the current state (the
-``descent_top`` best of them if > 0), and every removal (an extra arm is only worse until
-its traffic moves to the neighbour), get ``descent_samples`` continuous moves at
+removed, or an arm added where trajectory parts are explained by no arm
+(:mod:`.unexplained`, ``descent_add_support``). The lane candidates within
+``descent_screen`` nats of the current state (the ``descent_top`` best of them if > 0),
+every removal (an extra arm is only worse until its traffic moves to the neighbour) and
+every added arm get ``descent_samples`` continuous moves at
 ``descent_temp`` (:func:`run_moves`), a share ``descent_focus`` of the arm moves on the
-changed arm, in stages, dropped as soon as they fall behind; the best improvement is
+changed (or added) arm, in stages, dropped as soon as they fall behind; the best improvement is
 kept, for up to ``descent_rounds`` rounds. Monotone in the posterior. Measured effect and
 the choice of the screen: ``docs/tuning.md``.
 """
@@ -27,6 +29,7 @@ from .mcmc import Posterior
 from .moves import MOVE_NAMES, remove_arm_at
 from .refit import refit_lane_candidates
 from .state import HDR, NARMS, NIN, NOUT, STRIDE, Chain
+from .unexplained import best_new_arm, unexplained_angles
 
 __all__ = ['DESCENT_STEPS', 'DESCENT_CHECKS', 'Descent', 'descend', 'candidates', 'run_moves']
 
@@ -103,9 +106,11 @@ def _lane_steps(S, k, cfg):
 
 
 def _screened(S, L, cfg, post):
-    """The lane candidates of ``S`` worth moves (best first) and every removal: the
-    candidates of :func:`candidates`, the lane ones of each arm refitted in one grid pass
-    (:func:`.refit.refit_lane_candidates`, the numbers of one ``refit_gap_width`` each)."""
+    """The lane candidates of ``S`` worth moves (best first), every removal and every
+    added arm: the candidates of :func:`candidates`, the lane ones of each arm refitted in
+    one grid pass (:func:`.refit.refit_lane_candidates`, the numbers of one
+    ``refit_gap_width`` each); an arm where traffic is unexplained
+    (:mod:`.unexplained`), the moves focused on it."""
     lanes, removals = [], []
     _, C = post.loglik(S)
     for k in range(int(S[NARMS])):
@@ -119,7 +124,10 @@ def _screened(S, L, cfg, post):
             removals.append(S2)
     lanes.sort(key=lambda x: (-x[0], x[1]))
     top = lanes[:cfg.descent_top] if cfg.descent_top > 0 else lanes
-    return [(x[2], x[3]) for x in top] + [(S2, -1) for S2 in removals]
+    n = int(S[NARMS])
+    added = [(S2, n) for S2 in (best_new_arm(S, phi, post, cfg)
+                                for phi in unexplained_angles(S, post, cfg)) if S2 is not None]
+    return [(x[2], x[3]) for x in top] + [(S2, -1) for S2 in removals] + added
 
 
 def descend(S0: np.ndarray, cfg, post: Posterior, rng: np.random.Generator,
