@@ -105,12 +105,13 @@ def _lane_steps(S, k, cfg):
     return out
 
 
-def _screened(S, L, cfg, post):
+def _screened(S, L, cfg, post, deadline: float = math.inf):
     """The lane candidates of ``S`` worth moves (best first), every removal and every
     added arm: the candidates of :func:`candidates`, the lane ones of each arm refitted in
     one grid pass (:func:`.refit.refit_lane_candidates`, the numbers of one
     ``refit_gap_width`` each); an arm where traffic is unexplained
-    (:mod:`.unexplained`), the moves focused on it."""
+    (:mod:`.unexplained`), the moves focused on it -- made one by one as they are asked
+    for, none after ``deadline`` (a refit over a dozen angles each)."""
     lanes, removals = [], []
     _, C = post.loglik(S)
     for k in range(int(S[NARMS])):
@@ -124,10 +125,14 @@ def _screened(S, L, cfg, post):
             removals.append(S2)
     lanes.sort(key=lambda x: (-x[0], x[1]))
     top = lanes[:cfg.descent_top] if cfg.descent_top > 0 else lanes
+    yield from [(x[2], x[3]) for x in top] + [(S2, -1) for S2 in removals]
     n = int(S[NARMS])
-    added = [(S2, n) for S2 in (best_new_arm(S, phi, post, cfg)
-                                for phi in unexplained_angles(S, post, cfg)) if S2 is not None]
-    return [(x[2], x[3]) for x in top] + [(S2, -1) for S2 in removals] + added
+    for phi in unexplained_angles(S, post, cfg, C):
+        if time.perf_counter() >= deadline:
+            return
+        S2 = best_new_arm(S, phi, post, cfg, C)
+        if S2 is not None:
+            yield S2, n
 
 
 def descend(S0: np.ndarray, cfg, post: Posterior, rng: np.random.Generator,
@@ -140,7 +145,7 @@ def descend(S0: np.ndarray, cfg, post: Posterior, rng: np.random.Generator,
     S, L, drawn = run_moves(S0, cfg, post, rng)
     for _ in range(cfg.descent_rounds):
         best = None
-        for S2, k in _screened(S, L, cfg, post):
+        for S2, k in _screened(S, L, cfg, post, deadline):
             if time.perf_counter() >= deadline:
                 break
             S3, L3, n = run_moves(S2, cfg, post, rng, L, k)

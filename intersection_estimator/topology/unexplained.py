@@ -35,8 +35,9 @@ import math
 import numpy as np
 
 from .mcmc import Posterior
+from .likelihood import combine
 from .refit import refit_arm
-from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, STRIDE, WID
+from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, P_FLOOR, STRIDE, WID
 
 __all__ = ['unexplained_angles', 'with_arm', 'best_new_arm', 'SEARCH']
 
@@ -63,17 +64,19 @@ def _wrap(a):
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def unexplained_angles(S: np.ndarray, post: Posterior, cfg, max_angles: int = 2) -> list:
+def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: int = 2) -> list:
     """Directions [rad] of up to ``max_angles`` groups of unexplained observations of state
     ``S`` (module doc, step 1), strongest first; ``cfg`` a :class:`.config.TopologyConfig`
     (``clutter_floor``, ``descent_add_support``, ``min_sep_deg``, ``max_arms``). A group
     counts if some angle within :data:`SEARCH` of its direction keeps ``min_sep`` from
-    every arm (its traffic's directions lean towards a neighbour arm near the box)."""
+    every arm (its traffic's directions lean towards a neighbour arm near the box). ``C``:
+    the columns of ``S`` if at hand (:meth:`.mcmc.Posterior.loglik`)."""
     obs = post.obs
     n = int(S[NARMS])
     if len(obs) == 0 or cfg.descent_add_support <= 0 or n >= min(cfg.max_arms, MAXA):
         return []
-    _, C = post.loglik(S)
+    if C is None:
+        _, C = post.loglik(S)
     free = C[:n].max(axis=0) <= cfg.clutter_floor if n else np.ones(len(obs), bool)
     if not free.any():
         return []
@@ -106,9 +109,11 @@ def _valid_angles(S, phi, cfg, extra=()) -> np.ndarray:
     return grid[sep >= math.radians(cfg.min_sep_deg)]
 
 
-def with_arm(S: np.ndarray, phi: float, post: Posterior, lane_width: float) -> np.ndarray:
-    """``S`` with an arm at angle ``phi`` appended (one lane each way, no gap, offset or
-    bend), its lanes, gap, width and offset refitted (module doc, step 2)."""
+def with_arm(S: np.ndarray, phi: float, post: Posterior, lane_width: float, C=None):
+    """``(S2, log posterior)``: ``S`` with an arm at angle ``phi`` appended (one lane each
+    way, no gap, offset or bend), its lanes, gap, width and offset refitted (module doc,
+    step 2). ``C``: the columns of ``S`` if at hand (not changed): only the new arm's
+    column is computed then."""
     n = int(S[NARMS])
     S2 = S.copy()
     i = HDR + n * STRIDE
@@ -116,21 +121,28 @@ def with_arm(S: np.ndarray, phi: float, post: Posterior, lane_width: float) -> n
     S2[i + ANG], S2[i + NIN], S2[i + NOUT], S2[i + WID] = _wrap(phi), 1, 1, lane_width
     S2[NARMS] = n + 1
     t = post.t
-    C = post.columns()
-    post.loglik(S2, C)
+    if C is None:
+        C2 = post.columns()
+        post.loglik(S2, C2)
+    else:
+        C2 = C.copy()        # refit_arm computes the new arm's column itself
+    args = post.obs.kernel_args()
     for _ in range(2):
-        refit_arm(S2, n, t.P, t.logPn, *post.obs.kernel_args(), C, t.gaps, t.widths,
-                  t.log_floor)
-    return S2
+        refit_arm(S2, n, t.P, t.logPn, *args, C2, t.gaps, t.widths, t.log_floor)
+    # refit_arm left C2 the columns of S2 (as refit.refit_gap_width): no second scoring
+    ll = float(combine(C2, n + 1, -1, C2[0], False, args[-1], t.P[P_FLOOR]))
+    return S2, ll + post.log_prior(S2)
 
 
-def best_new_arm(S: np.ndarray, phi: float, post: Posterior, cfg):
+def best_new_arm(S: np.ndarray, phi: float, post: Posterior, cfg, C=None):
     """The best-scoring :func:`with_arm` over the valid angles of the :data:`SEARCH` grid
-    around ``phi`` (module doc, step 2); None when no angle keeps ``min_sep``."""
+    around ``phi`` (module doc, step 2); None when no angle keeps ``min_sep``. ``C``: the
+    columns of ``S`` if at hand."""
+    if C is None:
+        _, C = post.loglik(S)
     best, best_L = None, -math.inf
     for a in _valid_angles(S, phi, cfg):
-        S2 = with_arm(S, a, post, cfg.lane_width)
-        L2 = post(S2)
+        S2, L2 = with_arm(S, a, post, cfg.lane_width, C)
         if L2 > best_L:
             best, best_L = S2, L2
     return best

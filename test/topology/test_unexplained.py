@@ -70,10 +70,16 @@ def test_with_arm_refits_the_new_arm_to_its_traffic():
     k = 3                                          # lanes (2, 2)
     post = _posterior(CFG, gt)
     S = pack_state(_without(gt, k))
-    S2 = with_arm(S, gt.arms[k].angle, post, CFG.lane_width)
+    S2, L2 = with_arm(S, gt.arms[k].angle, post, CFG.lane_width)
     new = unpack_state(S2).arms[-1]
     assert (new.lanes_in, new.lanes_out) == (gt.arms[k].lanes_in, gt.arms[k].lanes_out)
-    assert post(S2) > post(S)
+    assert L2 == pytest.approx(post(S2), abs=1e-6) and L2 > post(S)
+    # with the columns of S at hand only the new arm's is computed: the same state
+    _, C = post.loglik(S)
+    C0 = C.copy()
+    S3, L3 = with_arm(S, gt.arms[k].angle, post, CFG.lane_width, C)
+    assert np.array_equal(S3, S2) and L3 == pytest.approx(L2, abs=1e-9)
+    assert np.array_equal(C, C0)
     n = len(gt.arms) - 1                           # the other arms and the center unchanged
     assert np.array_equal(S2[:HDR + n * STRIDE], np.r_[S[:2], n + 1, S[3:HDR + n * STRIDE]])
 
