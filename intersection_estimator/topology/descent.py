@@ -6,8 +6,9 @@ detections: in ~3/4 of the wrong lane counts the true counts win once center and
 follow). From the MAP state, :func:`descend` tries every candidate of :func:`candidates`:
 one arm's lane counts changed by a step of :data:`DESCENT_STEPS` (that arm's gap and
 width then set to the best grid point, :func:`.refit.refit_gap_width`), or one arm
-removed, or an arm added where trajectory parts are explained by no arm
-(:mod:`.unexplained`, ``descent_add_support``). The lane candidates within
+removed -- and an arm added where trajectory parts are explained by no arm
+(:mod:`.unexplained`, ``descent_add_support``; not in :func:`candidates`, made lazily
+within the deadline). The lane candidates within
 ``descent_screen`` nats of the current state (the ``descent_top`` best of them if > 0),
 every removal (an extra arm is only worse until its traffic moves to the neighbour) and
 every added arm get ``descent_samples`` continuous moves at

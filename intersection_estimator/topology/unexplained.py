@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
-from .mcmc import Posterior
 from .likelihood import combine
+from .mcmc import Posterior
 from .refit import refit_arm
 from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, P_FLOOR, STRIDE, WID
 
@@ -93,7 +93,7 @@ def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: 
         grp = near[j] & left
         phi = math.atan2(float(w[grp] @ np.sin(ang[grp])), float(w[grp] @ np.cos(ang[grp])))
         left &= ~grp
-        if _valid_angles(S, phi, cfg, [*out]).size:
+        if _valid_angles(S, phi, cfg, out).size:
             out.append(phi)
     return out
 
