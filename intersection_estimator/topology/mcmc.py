@@ -15,12 +15,13 @@ import math
 import numpy as np
 from numba import njit
 
-from .likelihood import ObservationSet, all_columns_into, arm_column_into, full_loglik
+from .likelihood import (ObservationSet, all_columns_into, arm_column_into, combine,
+                         full_loglik)
 from .moves import MOVE_NAMES, REMOVE_ARM, SHIFT, propose
 from .arm_bend import bend_log_prior
 from .arm_offset import offset_log_prior
 from .prior import log_prior
-from .state import MAXA, P_FLOOR, Chain
+from .state import MAXA, NARMS, P_FLOOR, Chain
 
 __all__ = ['temperatures', 'advance', 'acceptance_rates', 'state_log_prior', 'Posterior',
            'run_chain', 'observation_maxima', 'rescore_arm', 'WORK_FIELDS', 'W_MOVES', 'W_ENTRIES',
@@ -101,6 +102,13 @@ class Posterior:
     def log_prior(self, S) -> float:
         t = self.t
         return float(state_log_prior(S, t.P, t.logPA, t.logPn, t.arm_const))
+
+    def from_columns(self, S, C) -> float:
+        """log P(I|Z) + const of ``S`` whose columns ``C`` are at hand (a refit leaves
+        them): no second scoring."""
+        ll = float(combine(C, int(S[NARMS]), -1, C[0], False, self.obs.kernel_args()[-1],
+                           self.t.P[P_FLOOR]))
+        return ll + self.log_prior(S)
 
     def __call__(self, S) -> float:
         """log P(I|Z) + const of ``S`` (scored in full)."""

@@ -89,9 +89,8 @@ def refit_gap_width(post: Posterior, S: np.ndarray, k: int):
     post.loglik(S, C)
     args = post.obs.kernel_args()
     refit_arm(S, k, t.P, t.logPn, *args, C, t.gaps, t.widths, t.log_floor, True)
-    # refit_arm left C the columns of the refitted S: combine them, no second scoring
-    ll = float(combine(C, int(S[NARMS]), -1, C[0], False, args[-1], t.P[P_FLOOR]))
-    return S, ll + post.log_prior(S)
+    # refit_arm left C the columns of the refitted S
+    return S, post.from_columns(S, C)
 
 
 def refit_lane_candidates(post: Posterior, S: np.ndarray, k: int, counts, C=None):
@@ -112,8 +111,7 @@ def refit_lane_candidates(post: Posterior, S: np.ndarray, k: int, counts, C=None
     out = []
     for c in range(len(counts)):
         Ck[k] = out_col[c]      # scored as refit_gap_width scores it (the same bits)
-        ll = float(combine(Ck, int(S[NARMS]), -1, Ck[0], False, args[-1], t.P[P_FLOOR]))
-        out.append((out_S[c].copy(), ll + post.log_prior(out_S[c])))
+        out.append((out_S[c].copy(), post.from_columns(out_S[c], Ck)))
     return out
 
 

@@ -34,10 +34,10 @@ import math
 
 import numpy as np
 
-from .likelihood import combine
 from .mcmc import Posterior
+from .preprocess import _direction_class
 from .refit import refit_arm
-from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, P_FLOOR, STRIDE, WID
+from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, STRIDE, WID, arm_angles, wrap
 
 __all__ = ['unexplained_angles', 'with_arm', 'best_new_arm', 'SEARCH']
 
@@ -52,16 +52,11 @@ SEARCH = np.radians(np.arange(-12.0, 12.1, 2.0))
 def _directions(obs, center) -> np.ndarray:
     """Per observation: the direction of the arm it would belong to [rad] -- its travel
     axis pointed away from the center (orientation known), else its position angle."""
-    px, py = obs.x - center[0], obs.y - center[1]
-    pos = np.arctan2(py, px)
+    pos = np.arctan2(obs.y - center[1], obs.x - center[0])
     # an entering part heads to the center: its arm points the other way
-    sign = np.where(obs.hx * px + obs.hy * py < 0.0, -1.0, 1.0)
+    sign = -_direction_class(obs.x, obs.y, obs.hx, obs.hy, center)
     axis = np.arctan2(sign * obs.hy, sign * obs.hx)
     return np.where(obs.has_o, axis, pos)
-
-
-def _wrap(a):
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: int = 2) -> list:
@@ -82,7 +77,7 @@ def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: 
         return []
     ang = _directions(obs, S[CX:CY + 1])[free]
     w = obs.passages[free]
-    near = np.abs(_wrap(ang[:, None] - ang[None, :])) <= HALF_WIDTH
+    near = np.abs(wrap(ang[:, None] - ang[None, :])) <= HALF_WIDTH
     out = []
     left = np.ones(len(ang), bool)
     while len(out) < max_angles and left.any():
@@ -102,10 +97,10 @@ def _valid_angles(S, phi, cfg, extra=()) -> np.ndarray:
     """The angles of the :data:`SEARCH` grid around ``phi`` that keep ``min_sep`` from
     every arm of ``S`` and every angle of ``extra``."""
     grid = phi + SEARCH
-    taken = np.r_[S[HDR + ANG:HDR + int(S[NARMS]) * STRIDE:STRIDE], np.asarray(extra, float)]
+    taken = np.r_[arm_angles(S), np.asarray(extra, float)]
     if taken.size == 0:
         return grid
-    sep = np.abs(_wrap(grid[:, None] - taken[None, :])).min(axis=1)
+    sep = np.abs(wrap(grid[:, None] - taken[None, :])).min(axis=1)
     return grid[sep >= math.radians(cfg.min_sep_deg)]
 
 
@@ -118,7 +113,7 @@ def with_arm(S: np.ndarray, phi: float, post: Posterior, lane_width: float, C=No
     S2 = S.copy()
     i = HDR + n * STRIDE
     S2[i:i + STRIDE] = 0.0
-    S2[i + ANG], S2[i + NIN], S2[i + NOUT], S2[i + WID] = _wrap(phi), 1, 1, lane_width
+    S2[i + ANG], S2[i + NIN], S2[i + NOUT], S2[i + WID] = wrap(phi), 1, 1, lane_width
     S2[NARMS] = n + 1
     t = post.t
     if C is None:
@@ -126,12 +121,10 @@ def with_arm(S: np.ndarray, phi: float, post: Posterior, lane_width: float, C=No
         post.loglik(S2, C2)
     else:
         C2 = C.copy()        # refit_arm computes the new arm's column itself
-    args = post.obs.kernel_args()
     for _ in range(2):
-        refit_arm(S2, n, t.P, t.logPn, *args, C2, t.gaps, t.widths, t.log_floor)
-    # refit_arm left C2 the columns of S2 (as refit.refit_gap_width): no second scoring
-    ll = float(combine(C2, n + 1, -1, C2[0], False, args[-1], t.P[P_FLOOR]))
-    return S2, ll + post.log_prior(S2)
+        refit_arm(S2, n, t.P, t.logPn, *post.obs.kernel_args(), C2, t.gaps, t.widths,
+                  t.log_floor)
+    return S2, post.from_columns(S2, C2)     # refit_arm left C2 the columns of S2
 
 
 def best_new_arm(S: np.ndarray, phi: float, post: Posterior, cfg, C=None):

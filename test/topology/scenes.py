@@ -13,7 +13,9 @@ import numpy as np
 
 from intersection_estimator.model import ENTERING, LEAVING, Arm, Intersection
 from intersection_estimator.observations import Detections
-from intersection_estimator.topology import PreprocessConfig
+from intersection_estimator.topology import PreprocessConfig, TopologyEstimator
+from intersection_estimator.topology.config import Tables
+from intersection_estimator.topology.mcmc import Posterior
 
 #: The preprocessing settings these tests were written for (before PreprocessConfig was
 #: derived from TopologyConfig, its defaults): 2 m square voxels, unscaled weights, no
@@ -118,3 +120,11 @@ EASY = [
     easy_intersection(5, lanes=((1, 1), (1, 1), (2, 1), (1, 1), (1, 2)),
                       angles_deg=[-170, -100, -20, 50, 120]),
 ]
+
+
+def tracked_posterior(cfg, gt: Intersection, seed: int = 3) -> Posterior:
+    """The posterior of ``gt``'s tracked scene (10 clutter tracks) on the observations an
+    estimator with ``cfg`` preprocesses around the truth's center."""
+    est = TopologyEstimator(cfg, seed=0)
+    est.set_observations(scene(gt, 'tracked', seed=seed, clutter=10))
+    return Posterior(Tables(cfg), est.observations)

@@ -6,20 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from intersection_estimator.topology import TopologyConfig, TopologyEstimator
+from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.descent import DESCENT_STEPS, candidates, descend
 from intersection_estimator.topology.mcmc import Posterior
 from intersection_estimator.topology.state import pack_state, unpack_state
 
-from .scenes import EASY, same_topology, scene
-
-
-def _posterior(cfg, gt, seed=3):
-    """The observations an estimator preprocesses around the truth's center."""
-    est = TopologyEstimator(cfg, seed=0)
-    est.set_observations(scene(gt, 'tracked', seed=seed, clutter=10))
-    return Posterior(Tables(cfg), est.observations)
+from .scenes import EASY, same_topology, tracked_posterior
 
 
 def _off_by(gt, k, field, d):
@@ -29,12 +22,12 @@ def _off_by(gt, k, field, d):
 
 
 @pytest.mark.parametrize('field,d', [('lanes_in', 1), ('lanes_out', 1), ('lanes_in', -1)])
-def test_descent_repairs_a_lane_count_and_never_lowers_the_posterior(field, d):
+def test_descent_repairs_a_lane_count_and_never_lowers_thetracked_posterior(field, d):
     """Left one lane off (and the center shifted by 1 m) the descent finds the true counts
     and does not lose posterior."""
     gt = EASY[0]
     cfg = TopologyConfig(chains_tracked=1)
-    post = _posterior(cfg, gt)
+    post = tracked_posterior(cfg, gt)
     bad = _off_by(gt, 1, field, d)
     bad.center = bad.center + np.array([1.0, 0.0])
     S0 = pack_state(bad)
@@ -49,9 +42,9 @@ def test_descent_repairs_a_lane_count_and_never_lowers_the_posterior(field, d):
 def test_descent_off_or_without_observations_returns_the_start_unchanged():
     gt = EASY[1]
     S0 = pack_state(gt)
-    for cfg, post in ((TopologyConfig(descent_rounds=0), _posterior(TopologyConfig(), gt)),
+    for cfg, post in ((TopologyConfig(descent_rounds=0), tracked_posterior(TopologyConfig(), gt)),
                       (TopologyConfig(), Posterior(Tables(TopologyConfig()),
-                                                   _posterior(TopologyConfig(), gt).obs.subset(
+                                                   tracked_posterior(TopologyConfig(), gt).obs.subset(
                                                        np.zeros(0, np.int64))))):
         res = descend(S0, cfg, post, np.random.default_rng(0))
         assert np.array_equal(res.S, S0) and res.samples == 0 and res.lpost == -math.inf
@@ -61,7 +54,7 @@ def test_a_passed_deadline_stops_the_candidates_but_keeps_the_first_run():
     """With the deadline already passed only the initial run from the MAP state happens."""
     gt = EASY[0]
     cfg = TopologyConfig()
-    post = _posterior(cfg, gt)
+    post = tracked_posterior(cfg, gt)
     res = descend(pack_state(gt), cfg, post, np.random.default_rng(1), deadline=0.0)
     assert res.samples == cfg.descent_samples
 
@@ -69,7 +62,7 @@ def test_a_passed_deadline_stops_the_candidates_but_keeps_the_first_run():
 def test_candidates_are_lane_steps_within_bounds_and_removals():
     cfg = TopologyConfig(max_lanes=2)
     gt = EASY[0]                                  # lanes (1,1) (2,1) (1,2) (2,2)
-    post = _posterior(cfg, gt)
+    post = tracked_posterior(cfg, gt)
     S = pack_state(gt)
     cands = list(candidates(S, cfg, post))
     removals = [S2 for S2, k in cands if k < 0]

@@ -8,23 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from intersection_estimator.topology import TopologyConfig, TopologyEstimator
-from intersection_estimator.topology.config import Tables
+from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.topology.descent import descend
-from intersection_estimator.topology.mcmc import Posterior
 from intersection_estimator.topology.state import HDR, STRIDE, pack_state, unpack_state
 from intersection_estimator.topology.unexplained import unexplained_angles, with_arm
 
-from .scenes import EASY, same_topology, scene
+from .scenes import EASY, same_topology, tracked_posterior
 
 CFG = TopologyConfig(chains_tracked=1)
-
-
-def _posterior(cfg, gt, seed=3):
-    """The observations an estimator preprocesses around the truth's center."""
-    est = TopologyEstimator(cfg, seed=0)
-    est.set_observations(scene(gt, 'tracked', seed=seed, clutter=10))
-    return Posterior(Tables(cfg), est.observations)
 
 
 def _without(gt, k):
@@ -40,7 +31,7 @@ def _gap_deg(a, b):
 @pytest.mark.parametrize('gt_index,k', [(0, 1), (0, 3), (1, 0)])
 def test_the_missing_arms_traffic_gives_its_angle(gt_index, k):
     gt = EASY[gt_index]
-    post = _posterior(CFG, gt)
+    post = tracked_posterior(CFG, gt)
     angles = unexplained_angles(pack_state(_without(gt, k)), post, CFG)
     assert angles, 'no angle proposed for the missing arm'
     assert _gap_deg(angles[0], gt.arms[k].angle) < 5.0
@@ -48,7 +39,7 @@ def test_the_missing_arms_traffic_gives_its_angle(gt_index, k):
 
 def test_nothing_where_every_arm_is_there_or_when_off():
     gt = EASY[0]
-    post = _posterior(CFG, gt)
+    post = tracked_posterior(CFG, gt)
     S = pack_state(gt)
     assert unexplained_angles(S, post, CFG) == []
     off = TopologyConfig(chains_tracked=1, descent_add_support=0.0)
@@ -58,7 +49,7 @@ def test_nothing_where_every_arm_is_there_or_when_off():
 def test_an_angle_needs_the_passages():
     """The missing arm's parts are a few passages: a support above them proposes nothing."""
     gt = EASY[0]
-    post = _posterior(CFG, gt)
+    post = tracked_posterior(CFG, gt)
     S = pack_state(_without(gt, 1))
     assert unexplained_angles(S, post, CFG)
     many = TopologyConfig(chains_tracked=1, descent_add_support=1e4)
@@ -68,7 +59,7 @@ def test_an_angle_needs_the_passages():
 def test_with_arm_refits_the_new_arm_to_its_traffic():
     gt = EASY[0]
     k = 3                                          # lanes (2, 2)
-    post = _posterior(CFG, gt)
+    post = tracked_posterior(CFG, gt)
     S = pack_state(_without(gt, k))
     S2, L2 = with_arm(S, gt.arms[k].angle, post, CFG.lane_width)
     new = unpack_state(S2).arms[-1]
@@ -89,7 +80,7 @@ def test_descent_adds_the_missing_arm_and_not_when_off(k):
     """From the truth minus one arm the descent ends at the truth's topology with the
     proposal on; off, it cannot add an arm (its candidates only change or remove)."""
     gt = EASY[0]
-    post = _posterior(CFG, gt)
+    post = tracked_posterior(CFG, gt)
     S0 = pack_state(_without(gt, k))
     before = post(S0)
     res = descend(S0, CFG, post, np.random.default_rng(5))
