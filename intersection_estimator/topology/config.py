@@ -169,6 +169,10 @@ RANGES = {
     'descent_add_support': ('[0, inf)', 'the descent also tries an arm where trajectory parts of '
                             'this many vehicle passages are explained by no arm (0: off; '
                             'topology/unexplained.py)'),
+    # reported estimate
+    'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
+                             'overlapping by this many metres show side by side (0: off; '
+                             'topology/side_by_side.py) [m]'),
     # anytime API
     'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
     'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),
@@ -296,6 +300,8 @@ class TopologyConfig:
     descent_focus: float = 0.8
     descent_top: int = 0
     descent_add_support: float = 1.5
+    # reported estimate
+    side_by_side_overlap: float = 8.0
     # anytime API
     chunk: int = 500
     converge_window: int = 2000

@@ -34,6 +34,7 @@ from .mcmc import Posterior, acceptance_rates, new_work, temperatures
 from .moves import MOVE_NAMES
 from .preprocess import preprocess, radar_rows
 from .refit import refit_chain
+from .side_by_side import tracks_of
 from .state import (BEND, CX, CY, GAP, HDR, MAXA, OFF, P_GAP_MAX, P_OFF_MAX, STRIDE, Chain,
                     arm_angles, pack_state, unpack_state)
 from .support import reported
@@ -70,6 +71,7 @@ class TopologyEstimator:
         self._dets = Detections.empty()
         self._tracked = False                  # self._dets.has_tracks, read per chunk
         self._radar = None                     # radar_rows(self._dets), made on first use
+        self._tracks = None                    # side_by_side.tracks_of(self._dets), ditto
         #: likelihood work counters of the chains and of the descents
         #: (:data:`.mcmc.WORK_FIELDS`), since the reset; read by :mod:`.cost_model`
         self.work = {'chain': new_work(), 'descent': new_work()}
@@ -96,6 +98,7 @@ class TopologyEstimator:
         self._dets = dets.finite()
         self._tracked = self._dets.has_tracks
         self._radar = None
+        self._tracks = None
         self._since_data = 0
         if not self._chains:
             self._initialise()
@@ -274,6 +277,15 @@ class TopologyEstimator:
         self._timed('preprocess', t)
         return obs
 
+    def _window_tracks(self):
+        """The window's trajectories for :mod:`.side_by_side` (None: no tracked objects or
+        the step is off), grouped once per window."""
+        if not (self._tracked and self.cfg.side_by_side_overlap > 0):
+            return None
+        if self._tracks is None:
+            self._tracks = tracks_of(self._dets, self.cfg.weak_labels, self.cfg.min_track_speed)
+        return self._tracks
+
     def _advance(self, m: int, deadline: float) -> int:
         """``m`` samples of every chain (+ refits, + the descent when the schedule ends),
         the chains in lockstep; returns samples drawn."""
@@ -335,6 +347,7 @@ class TopologyEstimator:
         c = self._best_chain()
         key = (c.best_S.tobytes(), self.preprocess_count)
         if self._rep_key != key:
-            self._rep = reported(self._post, c.best_S, c.best_lpost, self.cfg)
+            self._rep = reported(self._post, c.best_S, c.best_lpost, self.cfg,
+                                 self._window_tracks())
             self._rep_key = key
         return self._rep

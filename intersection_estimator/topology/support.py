@@ -16,6 +16,7 @@ import numpy as np
 
 from .mcmc import Posterior
 from .moves import remove_arm_at
+from .side_by_side import Tracks, raise_counts
 from .state import NARMS
 
 __all__ = ['arm_support', 'reported']
@@ -33,9 +34,11 @@ def arm_support(post: Posterior, S: np.ndarray, clutter_floor: float) -> np.ndar
     return np.bincount(best[good], post.obs.passages[good], n)
 
 
-def reported(post: Posterior, S: np.ndarray, lpost: float, cfg):
+def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks | None = None):
     """``(state, confidence per arm, log posterior)`` of the estimate reported for the MAP
-    state ``S`` of log posterior ``lpost``; ``cfg``: a :class:`.config.TopologyConfig`."""
+    state ``S`` of log posterior ``lpost``; ``cfg``: a :class:`.config.TopologyConfig`.
+    With the window's ``tracks`` the lane counts are raised to what the traffic shows side
+    by side (:mod:`.side_by_side`)."""
     S = S.copy()
     sup = arm_support(post, S, cfg.clutter_floor)
     changed = False
@@ -48,4 +51,9 @@ def reported(post: Posterior, S: np.ndarray, lpost: float, cfg):
         changed = True
     if changed:
         lpost = post(S)
+    if len(post.obs):
+        S, raised = raise_counts(post, S, tracks, cfg)
+        if raised is not None:
+            lpost = raised
+            sup = arm_support(post, S, cfg.clutter_floor)
     return S, 1.0 - np.exp(-sup / 3.0), lpost

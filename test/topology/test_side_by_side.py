@@ -1,0 +1,102 @@
+"""Lanes the traffic shows side by side (beyond the paper, topology/side_by_side.py): the
+count from overlapping lateral profiles on a curved road, the profiles of a scene's arm,
+and the raised, refitted state that the reported estimate takes."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from intersection_estimator.topology import TopologyConfig
+from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, entering_rows,
+                                                          lanes_side_by_side, nearest_arm,
+                                                          raise_counts, tracks_of)
+from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, pack_state
+from intersection_estimator.topology.support import reported
+
+from .scenes import EASY, scene, tracked_posterior
+
+CFG = TopologyConfig(chains_tracked=1)
+W = 3.5
+
+
+def _profiles(offsets, rng, lo=0.0, hi=60.0, curve=0.004, noise=0.15, grid=None):
+    """One lateral profile per offset on a road that curves (t = curve * s^2: 14 m of
+    sideways drift over 60 m, so the lane means of a straight frame mix), NaN off
+    ``[lo, hi]``."""
+    s = np.arange(0.0, 80.0, STEP) if grid is None else grid
+    T = np.full((len(offsets), len(s)), np.nan)
+    on = (s >= lo) & (s <= hi)
+    for i, o in enumerate(offsets):
+        T[i, on] = curve * s[on] ** 2 + o + rng.normal(0.0, noise, on.sum())
+    return T
+
+
+@pytest.mark.parametrize('offsets,lanes', [
+    ((0.0, 0.1, -0.2, 0.05), 1),
+    ((0.0, 0.1, W, W + 0.2), 2),
+    ((0.0, 2 * W, 2 * W - 0.1), 3),            # a lane between them that no vehicle used
+    ((0.0, 0.2, 0.5 * W), 1),                  # half a lane apart: not a lane of its own
+])
+def test_lanes_from_the_separation_whatever_the_curve(offsets, lanes):
+    T = _profiles(offsets, np.random.default_rng(0))
+    assert lanes_side_by_side(T, W, 8.0) == lanes
+
+
+def test_parts_that_do_not_overlap_show_nothing():
+    rng = np.random.default_rng(1)
+    T = np.vstack([_profiles([0.0], rng, 0.0, 20.0), _profiles([W], rng, 30.0, 60.0)])
+    assert lanes_side_by_side(T, W, 8.0) == 0
+    assert lanes_side_by_side(T[:1], W, 8.0) == 0
+
+
+def test_a_scene_arm_gives_one_profile_per_part_and_its_lanes():
+    gt = EASY[0]                                    # arm 3: 2 entering, 2 leaving lanes
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    S = pack_state(gt)
+    T_in, T_out = arm_profiles(S, 3, tr, nearest_arm(S, tr.xy), entering_rows(S, tr),
+                               12.0, 75.0)
+    assert len(T_in) == 4 and len(T_out) >= 2      # 2 vehicles per entering lane
+    assert lanes_side_by_side(T_in, gt.arms[3].lane_width, 8.0) == 2
+
+
+@pytest.mark.parametrize('k,side', [(1, NIN), (3, NOUT)])
+def test_a_lane_too_few_is_raised_and_refitted(k, side):
+    gt = EASY[0]
+    post = tracked_posterior(CFG, gt)
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    S = pack_state(gt)
+    fewer = S.copy()
+    fewer[HDR + k * STRIDE + side] -= 1
+    S2, lp = raise_counts(post, fewer.copy(), tr, CFG)
+    assert lp is not None and S2[HDR + k * STRIDE + side] == S[HDR + k * STRIDE + side]
+    assert lp == pytest.approx(post(S2))
+    assert lp > post(fewer)
+
+
+def test_the_truth_is_kept_and_the_step_can_be_switched_off():
+    gt = EASY[0]
+    post = tracked_posterior(CFG, gt)
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    S = pack_state(gt)
+    same, lp = raise_counts(post, S.copy(), tr, CFG)
+    assert lp is None and np.array_equal(same, S)
+    fewer = S.copy()
+    fewer[HDR + 1 * STRIDE + NIN] -= 1
+    off = replace(CFG, side_by_side_overlap=0.0)
+    kept, lp = raise_counts(post, fewer.copy(), tr, off)
+    assert lp is None and np.array_equal(kept, fewer)
+    assert raise_counts(post, fewer.copy(), None, CFG)[1] is None
+
+
+def test_the_reported_estimate_takes_the_raised_counts():
+    gt = EASY[0]
+    post = tracked_posterior(CFG, gt)
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    fewer = pack_state(gt)
+    fewer[HDR + 1 * STRIDE + NIN] -= 1
+    S, conf, lpost = reported(post, fewer, post(fewer), CFG, tr)
+    assert S[HDR + 1 * STRIDE + NIN] == gt.arms[1].lanes_in
+    assert lpost == pytest.approx(post(S)) and len(conf) == len(gt.arms)
+    S0, _, _ = reported(post, fewer, post(fewer), CFG)         # without tracks: as it was
+    assert S0[HDR + 1 * STRIDE + NIN] == gt.arms[1].lanes_in - 1
