@@ -55,6 +55,9 @@ MAX_GAP = 6.0
 REACH = 2.0
 #: at most this many parts per arm and direction (the longest) are compared
 MAX_PARTS = 64
+#: the lanes are counted over the whole profiles and over their first this many metres:
+#: a turn pocket's vehicles drive beside the others near the box only [m]
+NEAR_M = 36.0
 
 
 class Tracks(NamedTuple):
@@ -225,8 +228,9 @@ def _lanes_spanned(p: np.ndarray, w: float) -> int:
 
 def lanes_side_by_side(T: np.ndarray, w: float, min_overlap: float) -> int:
     """Lanes that the profiles ``T`` (one arm and direction, :func:`arm_profiles`) show
-    side by side: 0 when no two parts overlap by ``min_overlap`` metres."""
-    groups = _positions(T, min_overlap)
+    side by side, over their whole length or their first ``NEAR_M`` metres: 0 when no two
+    parts overlap by ``min_overlap`` metres."""
+    groups = _positions(T, min_overlap) + _positions(T[:, :int(NEAR_M / STEP)], min_overlap)
     return max((_lanes_spanned(p, w) for p in groups), default=0)
 
 

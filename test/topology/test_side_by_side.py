@@ -43,6 +43,18 @@ def test_lanes_from_the_separation_whatever_the_curve(offsets, lanes):
     assert lanes_side_by_side(T, W, 8.0) == lanes
 
 
+def test_a_turn_pocket_counts_near_the_box():
+    """The pocket's vehicle drives beside the others over the first 24 m only and in the
+    main lane beyond: over the whole overlap its median separation is 0."""
+    rng = np.random.default_rng(2)
+    T = _profiles([0.0, 0.1, -0.1, 0.0], rng)
+    near = np.arange(T.shape[1]) * STEP < 24.0
+    T[3, near] += W
+    assert lanes_side_by_side(T, W, 8.0) == 2
+    T[3, near] -= W
+    assert lanes_side_by_side(T, W, 8.0) == 1
+
+
 def test_parts_that_do_not_overlap_show_nothing():
     rng = np.random.default_rng(1)
     T = np.vstack([_profiles([0.0], rng, 0.0, 20.0), _profiles([W], rng, 30.0, 60.0)])
