@@ -8,6 +8,10 @@ heading voxels count detections per passage, ``ObservationSet.passages``). The d
 1.5 keeps an arm that one vehicle entered and another left (real-junction traffic in short
 windows, docs/tuning.md) and drops a single aligned part. An arm's confidence is
 ``1 - exp(-passages / 3)``.
+
+With the window's trajectories the lane counts of the state left are then raised to what
+overlapping trajectory parts show side by side (:mod:`.side_by_side`), the raised arms'
+gap, width and offset refitted; the log posterior reported is that of the raised state.
 """
 
 from __future__ import annotations
