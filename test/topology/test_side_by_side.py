@@ -4,6 +4,7 @@ and the raised, refitted state that the reported estimate takes."""
 
 from dataclasses import replace
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
@@ -112,3 +113,14 @@ def test_the_reported_estimate_takes_the_raised_counts():
     assert lpost == pytest.approx(post(S)) and len(conf) == len(gt.arms)
     S0, _, _ = reported(post, fewer, post(fewer), CFG)         # without tracks: as it was
     assert S0[HDR + 1 * STRIDE + NIN] == gt.arms[1].lanes_in - 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(slots=st.lists(st.integers(0, 3), min_size=2, max_size=6),
+       curve=st.floats(-0.006, 0.006), shift=st.floats(-5.0, 5.0), seed=st.integers(0, 99))
+def test_the_count_is_the_span_of_the_slots_whatever_curve_and_shift(slots, curve, shift, seed):
+    """Parts in lanes ``slots`` (whole lane widths apart) on any curve, the whole road
+    shifted sideways: the lanes spanned are max - min + 1."""
+    rng = np.random.default_rng(seed)
+    T = _profiles([shift + W * k for k in slots], rng, curve=curve)
+    assert lanes_side_by_side(T, W, 8.0) == max(slots) - min(slots) + 1
