@@ -173,6 +173,9 @@ RANGES = {
     'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
                              'overlapping by this many metres show side by side (0: off; '
                              'topology/side_by_side.py) [m]'),
+    'side_by_side_cap': ('[0, 1000]', 'with at least this many trajectory parts compared side by '
+                         'side, an arm direction has at most one lane beyond those they show '
+                         '(0: no cap; topology/side_by_side.py)'),
     # anytime API
     'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
     'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),
@@ -302,6 +305,7 @@ class TopologyConfig:
     descent_add_support: float = 1.5
     # reported estimate
     side_by_side_overlap: float = 8.0
+    side_by_side_cap: int = 4
     # anytime API
     chunk: int = 500
     converge_window: int = 2000

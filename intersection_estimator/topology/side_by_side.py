@@ -10,11 +10,15 @@ the curve of the road; its median over the overlap is the separation of their la
 :func:`lanes_side_by_side` places the parts of an arm and direction on one lateral line
 (least squares over the separations of the overlapping pairs, per connected group) and
 counts the lanes that groups of positions a whole number of lane widths apart (within
-``TOL``) span. :func:`raise_counts` raises an arm's lane count to that and refits its gap,
-width and axis offset for the new counts (:func:`.refit.refit_lane_candidates`): a lower
-bound from the data, kept where the part means alone would pay for fewer lanes. It never
-lowers a count: two lanes that no pair of vehicles drove at the same stretch are not
-visible here, and the count of the likelihood stands.
+``TOL``) span. :func:`fit_counts` sets an arm's lane count from it (:func:`counted`) and
+refits its gap, width and axis offset for the new counts
+(:func:`.refit.refit_lane_candidates`):
+
+* a lower bound, kept where the part means alone would pay for fewer lanes;
+* an upper bound of one lane more than shown, once ``side_by_side_cap`` (4) parts were
+  compared: on a curved approach the straight lane rays need an extra lane to cover the
+  means' drift, which side by side shows as one lane. Lowering to the lanes shown lost more
+  than it fixed: lanes that no pair of vehicles drove at one stretch are not visible here.
 
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
@@ -38,7 +42,7 @@ from .refit import refit_lane_candidates
 from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
 
 __all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_profiles',
-           'lanes_side_by_side', 'raise_counts']
+           'lanes_side_by_side', 'side_by_side', 'counted', 'fit_counts']
 
 #: station step of the lateral profiles [m]
 STEP = 2.0
@@ -230,14 +234,32 @@ def lanes_side_by_side(T: np.ndarray, w: float, min_overlap: float) -> int:
     """Lanes that the profiles ``T`` (one arm and direction, :func:`arm_profiles`) show
     side by side, over their whole length or their first ``NEAR_M`` metres: 0 when no two
     parts overlap by ``min_overlap`` metres."""
-    groups = _positions(T, min_overlap) + _positions(T[:, :int(NEAR_M / STEP)], min_overlap)
-    return max((_lanes_spanned(p, w) for p in groups), default=0)
+    return side_by_side(T, w, min_overlap)[0]
 
 
-def raise_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray, float | None]:
-    """``S`` with every arm's lane counts raised to what the traffic shows side by side
-    (:func:`lanes_side_by_side`, up to ``cfg.max_lanes``), gap / width / offset refitted;
-    returns ``(S, log posterior)``, the log posterior None when nothing was raised."""
+def side_by_side(T: np.ndarray, w: float, min_overlap: float) -> tuple[int, int]:
+    """(:func:`lanes_side_by_side`, the number of parts compared: in a group of the whole
+    profiles)."""
+    whole = _positions(T, min_overlap)
+    groups = whole + _positions(T[:, :int(NEAR_M / STEP)], min_overlap)
+    return (max((_lanes_spanned(p, w) for p in groups), default=0),
+            int(sum(len(p) for p in whole)))
+
+
+def counted(n: int, shown: int, compared: int, cfg) -> int:
+    """Lane count of one arm direction given the MAP's ``n``, the lanes ``shown`` side by
+    side and the parts ``compared``: at least ``shown`` (up to ``max_lanes``); with at least
+    ``side_by_side_cap`` parts compared and a lane shown, at most one lane beyond them."""
+    want = min(cfg.max_lanes, max(n, shown))
+    if cfg.side_by_side_cap > 0 and compared >= cfg.side_by_side_cap and shown >= 1:
+        want = min(want, shown + 1)
+    return want
+
+
+def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray, float | None]:
+    """``S`` with every arm's lane counts set by what the traffic shows side by side
+    (:func:`counted`), gap / width / offset of a changed arm refitted; returns
+    ``(S, log posterior)``, the log posterior None when nothing changed."""
     if tr is None or cfg.side_by_side_overlap <= 0:
         return S, None
     arm_of_row, entering = nearest_arm(S, tr.xy), entering_rows(S, tr)
@@ -248,8 +270,7 @@ def raise_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarra
         i0 = HDR + k * STRIDE
         profiles = arm_profiles(S, k, tr, arm_of_row, entering, inner, outer, cfg.traffic_side)
         now = [int(S[i0 + NIN]), int(S[i0 + NOUT])]
-        want = [min(cfg.max_lanes, max(n, lanes_side_by_side(T, S[i0 + WID],
-                                                              cfg.side_by_side_overlap)))
+        want = [counted(n, *side_by_side(T, S[i0 + WID], cfg.side_by_side_overlap), cfg)
                 for n, T in zip(now, profiles)]
         if want != now:
             (S, lpost), = refit_lane_candidates(post, S, k, [want])

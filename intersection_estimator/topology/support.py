@@ -20,7 +20,7 @@ import numpy as np
 
 from .mcmc import Posterior
 from .moves import remove_arm_at
-from .side_by_side import Tracks, raise_counts
+from .side_by_side import Tracks, fit_counts
 from .state import NARMS
 
 __all__ = ['arm_support', 'reported']
@@ -56,7 +56,7 @@ def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks |
     if changed:
         lpost = post(S)
     if len(post.obs):
-        S, raised = raise_counts(post, S, tracks, cfg)
+        S, raised = fit_counts(post, S, tracks, cfg)
         if raised is not None:
             lpost = raised
             sup = arm_support(post, S, cfg.clutter_floor)

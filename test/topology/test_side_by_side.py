@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from intersection_estimator.topology import TopologyConfig
-from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, entering_rows,
+from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, counted,
+                                                          entering_rows, fit_counts,
                                                           lanes_side_by_side, nearest_arm,
-                                                          raise_counts, tracks_of)
+                                                          side_by_side, tracks_of)
 from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, pack_state
 from intersection_estimator.topology.support import reported
 
@@ -56,6 +57,25 @@ def test_a_turn_pocket_counts_near_the_box():
     assert lanes_side_by_side(T, W, 8.0) == 1
 
 
+def test_the_parts_compared_are_counted():
+    T = _profiles([0.0, 0.1, W, W], np.random.default_rng(3))
+    assert side_by_side(T, W, 8.0) == (2, 4)
+    assert side_by_side(T[:1], W, 8.0) == (0, 0)
+
+
+@pytest.mark.parametrize('n,shown,compared,cap,want', [
+    (1, 2, 4, 4, 2),          # raised to what is shown
+    (4, 1, 4, 4, 2),          # at most one lane beyond it, once 4 parts were compared
+    (4, 1, 3, 4, 4),          # too few parts compared: the MAP's count stands
+    (4, 1, 9, 0, 4),          # no cap
+    (2, 0, 9, 4, 2),          # nothing shown: nothing capped
+    (9, 9, 9, 4, 6),          # never beyond max_lanes
+])
+def test_counted(n, shown, compared, cap, want):
+    cfg = replace(CFG, side_by_side_cap=cap)
+    assert counted(n, shown, compared, cfg) == want
+
+
 def test_parts_that_do_not_overlap_show_nothing():
     rng = np.random.default_rng(1)
     T = np.vstack([_profiles([0.0], rng, 0.0, 20.0), _profiles([W], rng, 30.0, 60.0)])
@@ -75,13 +95,14 @@ def test_a_scene_arm_gives_one_profile_per_part_and_its_lanes():
 
 @pytest.mark.parametrize('k,side', [(1, NIN), (3, NOUT)])
 def test_a_lane_too_few_is_raised_and_refitted(k, side):
+    """(The scene's lanes have 2 vehicles each: the cap stays out of it.)"""
     gt = EASY[0]
     post = tracked_posterior(CFG, gt)
     tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
     S = pack_state(gt)
     fewer = S.copy()
     fewer[HDR + k * STRIDE + side] -= 1
-    S2, lp = raise_counts(post, fewer.copy(), tr, CFG)
+    S2, lp = fit_counts(post, fewer.copy(), tr, CFG)
     assert lp is not None and S2[HDR + k * STRIDE + side] == S[HDR + k * STRIDE + side]
     assert lp == pytest.approx(post(S2))
     assert lp > post(fewer)
@@ -92,14 +113,14 @@ def test_the_truth_is_kept_and_the_step_can_be_switched_off():
     post = tracked_posterior(CFG, gt)
     tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
     S = pack_state(gt)
-    same, lp = raise_counts(post, S.copy(), tr, CFG)
+    same, lp = fit_counts(post, S.copy(), tr, CFG)
     assert lp is None and np.array_equal(same, S)
     fewer = S.copy()
     fewer[HDR + 1 * STRIDE + NIN] -= 1
     off = replace(CFG, side_by_side_overlap=0.0)
-    kept, lp = raise_counts(post, fewer.copy(), tr, off)
+    kept, lp = fit_counts(post, fewer.copy(), tr, off)
     assert lp is None and np.array_equal(kept, fewer)
-    assert raise_counts(post, fewer.copy(), None, CFG)[1] is None
+    assert fit_counts(post, fewer.copy(), None, CFG)[1] is None
 
 
 def test_the_reported_estimate_takes_the_raised_counts():
@@ -124,3 +145,16 @@ def test_the_count_is_the_span_of_the_slots_whatever_curve_and_shift(slots, curv
     rng = np.random.default_rng(seed)
     T = _profiles([shift + W * k for k in slots], rng, curve=curve)
     assert lanes_side_by_side(T, W, 8.0) == max(slots) - min(slots) + 1
+
+
+def test_lanes_far_beyond_what_the_traffic_shows_are_capped():
+    """Arm 3's four entering parts show its 2 lanes: a state with 4 keeps at most 3."""
+    gt = EASY[0]
+    post = tracked_posterior(CFG, gt)
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    more = pack_state(gt)
+    more[HDR + 3 * STRIDE + NIN] = 4
+    S2, lp = fit_counts(post, more.copy(), tr, CFG)
+    assert lp is not None and S2[HDR + 3 * STRIDE + NIN] == 3
+    kept, lp = fit_counts(post, more.copy(), tr, replace(CFG, side_by_side_cap=0))
+    assert lp is None and kept[HDR + 3 * STRIDE + NIN] == 4
