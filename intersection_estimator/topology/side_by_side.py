@@ -34,8 +34,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..observations import Detections
 from .refit import refit_lane_candidates
@@ -94,9 +92,10 @@ def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0) -> Track
             return None
         tid, xy, hd = tid[keep], xy[keep], hd[keep]
         new = np.r_[True, tid[1:] != tid[:-1]]
-    h = _path_directions(xy, new)
     known = np.isfinite(hd)                       # the tracker's heading where it gives one
-    h[known] = np.stack([np.cos(hd[known]), np.sin(hd[known])], axis=1)
+    h = np.stack([np.cos(hd), np.sin(hd)], axis=1)
+    if not known.all():
+        h[~known] = _path_directions(xy, new)[~known]
     return Tracks(xy, h, np.cumsum(new) - 1)
 
 
@@ -195,24 +194,44 @@ def _positions(T: np.ndarray, min_overlap: float) -> list[np.ndarray]:
     iu, ju = np.nonzero(np.triu(overlap, 1))
     if len(iu) == 0:
         return []
-    D = np.where(both[iu, ju], T[iu] - T[ju], np.nan)
-    sep = np.nanmedian(D, axis=1)
-    ncomp, lab = connected_components(coo_matrix((np.ones(len(iu)), (iu, ju)), shape=(P, P)),
-                                      directed=False)
+    sep = _row_medians(np.where(both[iu, ju], T[iu] - T[ju], np.nan))
+    lab = _components(overlap | overlap.T)
     out = []
-    for g in range(ncomp):
+    for g in np.unique(lab):
         members = np.flatnonzero(lab == g)
         if len(members) < 2:
             continue
-        idx = {int(m): q for q, m in enumerate(members)}
+        pos = np.full(P, -1)
+        pos[members] = np.arange(len(members))
         e = np.flatnonzero(lab[iu] == g)
         A = np.zeros((len(e) + 1, len(members)))
-        A[np.arange(len(e)), [idx[int(i)] for i in iu[e]]] = 1.0
-        A[np.arange(len(e)), [idx[int(j)] for j in ju[e]]] = -1.0
+        A[np.arange(len(e)), pos[iu[e]]] = 1.0
+        A[np.arange(len(e)), pos[ju[e]]] = -1.0
         A[-1, 0] = 1.0
-        b = np.r_[sep[e], 0.0]
-        out.append(np.linalg.lstsq(A, b, rcond=None)[0])
+        out.append(np.linalg.lstsq(A, np.r_[sep[e], 0.0], rcond=None)[0])
     return out
+
+
+def _row_medians(D: np.ndarray) -> np.ndarray:
+    """Median of every row's finite entries (each row has at least one): NaN sorts last,
+    so the middle of the first ``count`` entries (``np.nanmedian`` without its masked-array
+    cost on many short rows)."""
+    D = np.sort(D, axis=1)
+    cnt = np.isfinite(D).sum(1)
+    r = np.arange(len(D))
+    return 0.5 * (D[r, (cnt - 1) // 2] + D[r, cnt // 2])
+
+
+def _components(adj: np.ndarray) -> np.ndarray:
+    """Connected-component label (its smallest member) of every node of the symmetric
+    boolean adjacency ``adj``: labels spread to neighbours until they stop changing."""
+    lab = np.arange(len(adj))
+    big = len(adj)
+    while True:
+        nxt = np.minimum(lab, np.where(adj, lab[None, :], big).min(axis=1))
+        if np.array_equal(nxt, lab):
+            return lab
+        lab = nxt
 
 
 def _lanes_spanned(p: np.ndarray, w: float) -> int:

@@ -158,3 +158,18 @@ def test_lanes_far_beyond_what_the_traffic_shows_are_capped():
     assert lp is not None and S2[HDR + 3 * STRIDE + NIN] == 3
     kept, lp = fit_counts(post, more.copy(), tr, replace(CFG, side_by_side_cap=0))
     assert lp is None and kept[HDR + 3 * STRIDE + NIN] == 4
+
+
+def test_rows_without_a_heading_take_it_from_their_path():
+    gt = EASY[0]
+    dets = scene(gt, 'tracked', seed=3)
+    with_heading = tracks_of(dets)
+    dets.heading[:] = np.nan
+    from_path = tracks_of(dets)
+    # the scene's 0.3 m position noise on 1 m steps: the path heading is within ~20 deg
+    cos = (with_heading.h * from_path.h).sum(1)
+    assert np.median(cos) > np.cos(np.radians(10.0))
+    S = pack_state(gt)
+    T_in, _ = arm_profiles(S, 3, from_path, nearest_arm(S, from_path.xy),
+                           entering_rows(S, from_path), 12.0, 75.0)
+    assert lanes_side_by_side(T_in, gt.arms[3].lane_width, 8.0) == 2
