@@ -9,9 +9,10 @@ heading voxels count detections per passage, ``ObservationSet.passages``). The d
 windows, docs/tuning.md) and drops a single aligned part. An arm's confidence is
 ``1 - exp(-passages / 3)``.
 
-With the window's trajectories the lane counts of the state left are then raised to what
-overlapping trajectory parts show side by side (:mod:`.side_by_side`), the raised arms'
-gap, width and offset refitted; the log posterior reported is that of the raised state.
+With the window's trajectories the lane counts of the state left are then set by what
+overlapping trajectory parts show side by side (:mod:`.side_by_side`: at least the lanes
+shown, and at most one more once enough parts were compared), the changed arms' gap, width
+and offset refitted; the log posterior reported is that of the changed state.
 """
 
 from __future__ import annotations
@@ -41,8 +42,8 @@ def arm_support(post: Posterior, S: np.ndarray, clutter_floor: float) -> np.ndar
 def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks | None = None):
     """``(state, confidence per arm, log posterior)`` of the estimate reported for the MAP
     state ``S`` of log posterior ``lpost``; ``cfg``: a :class:`.config.TopologyConfig`.
-    With the window's ``tracks`` the lane counts are raised to what the traffic shows side
-    by side (:mod:`.side_by_side`)."""
+    With the window's ``tracks`` the lane counts are set by what the traffic shows side by
+    side (:mod:`.side_by_side`)."""
     S = S.copy()
     sup = arm_support(post, S, cfg.clutter_floor)
     changed = False
