@@ -36,7 +36,7 @@ from .voxels import (RAYS, arm_voxel_set, assign_arms, radar_frame, radar_voxels
 
 __all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations', 'RadarRows',
            'radar_rows', 'radar_filter', 'heading_observations', 'preprocess', 'split_tracks',
-           'unit_vectors']
+           'moving_tracks', 'unit_vectors']
 
 
 def unit_vectors(vx, vy):
@@ -56,21 +56,11 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
     """Split trajectories at the point closest to ``center``; mean point + direction.
     With ``arm_angles`` and ``bend_min_deg > 0`` the rows of bent approaches are first
     straightened along their arms (:mod:`.bend`, beyond the paper)."""
-    sel = dets.track_id >= 0
-    if not sel.any():
+    order, starts, ends = moving_tracks(dets, dets.track_id >= 0, cfg.min_track_speed)
+    if len(starts) == 0:
         return ObservationSet.empty()
-    tid, t, xy, hd = dets.track_id[sel], dets.t[sel], dets.xy[sel], dets.heading[sel]
-    sp, lab = dets.speed[sel], dets.label[sel]
-    order = np.lexsort((t, tid))
-    tid, xy, hd, sp, lab = tid[order], xy[order], hd[order], sp[order], lab[order]
-    starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
-    ends = np.r_[starts[1:], len(tid)]
-    if cfg.min_track_speed > 0 and np.isfinite(sp).any():   # static (false) tracks
-        vmax = np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), starts)
-        moving = vmax >= cfg.min_track_speed
-        starts, ends = starts[moving], ends[moving]
-        if len(starts) == 0:
-            return ObservationSet.empty()
+    tid, xy, hd, lab = (dets.track_id[order], dets.xy[order], dets.heading[order],
+                        dets.label[order])
     c = np.asarray(center, float)
     if math.isfinite(cfg.track_radius):   # parts made of the rows near the box only
         starts, ends, tid, xy, hd, lab = _rows_within(c, cfg.track_radius, starts, ends, tid, xy,
@@ -115,6 +105,23 @@ def _part_sigma(track_label, part_track, cfg: PreprocessConfig) -> np.ndarray:
         weak = np.isin(track_label[part_track], np.asarray(cfg.weak_labels, np.int64))
         sig[weak] = cfg.sigma_track_weak
     return sig
+
+
+def moving_tracks(dets: Detections, sel: np.ndarray, min_speed: float):
+    """``(order, starts, ends)``: the rows ``sel`` of ``dets`` sorted by track id and time
+    (indices into ``dets``) and the bounds in ``order`` of each track that is not static:
+    with ``min_speed > 0`` and speeds known, a track never faster than ``min_speed`` is a
+    false track of static clutter and has no bounds."""
+    idx = np.flatnonzero(sel)
+    order = idx[np.lexsort((dets.t[idx], dets.track_id[idx]))]
+    tid, sp = dets.track_id[order], dets.speed[order]
+    starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]]) if len(tid) else np.zeros(0, np.int64)
+    ends = np.r_[starts[1:], len(tid)].astype(np.int64)
+    if min_speed > 0 and np.isfinite(sp).any():
+        vmax = np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), starts)
+        moving = vmax >= min_speed
+        starts, ends = starts[moving], ends[moving]
+    return order, starts, ends
 
 
 def _rows_within(c, radius: float, starts, ends, tid, xy, hd, lab):

@@ -36,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..observations import Detections
+from .preprocess import moving_tracks
 from .refit import refit_lane_candidates
 from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
 
@@ -79,19 +80,12 @@ def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0) -> Track
     sel = dets.track_id >= 0
     if len(skip_labels):
         sel &= ~np.isin(dets.label, np.asarray(skip_labels, np.int64))
-    if not sel.any():
+    order, starts, ends = moving_tracks(dets, sel, min_speed)
+    if len(starts) == 0:
         return None
-    order = np.lexsort((dets.t[sel], dets.track_id[sel]))
-    tid, xy = dets.track_id[sel][order], dets.xy[sel][order]
-    sp, hd = dets.speed[sel][order], dets.heading[sel][order]
+    rows = np.concatenate([order[a:b] for a, b in zip(starts, ends)])
+    tid, xy, hd = dets.track_id[rows], dets.xy[rows], dets.heading[rows]
     new = np.r_[True, tid[1:] != tid[:-1]]
-    if min_speed > 0 and np.isfinite(sp).any():
-        vmax = np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), np.flatnonzero(new))
-        keep = (vmax >= min_speed)[np.cumsum(new) - 1]
-        if not keep.any():
-            return None
-        tid, xy, hd = tid[keep], xy[keep], hd[keep]
-        new = np.r_[True, tid[1:] != tid[:-1]]
     known = np.isfinite(hd)                       # the tracker's heading where it gives one
     h = np.stack([np.cos(hd), np.sin(hd)], axis=1)
     if not known.all():
