@@ -173,6 +173,13 @@ RANGES = {
     'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
                              'overlapping by this many metres show side by side (0: off; '
                              'topology/side_by_side.py) [m]'),
+    'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
+                      'trajectory parts are and the state with it is at most this many nats '
+                      'below the state without (0: off; topology/weak_arms.py) [nats]'),
+    'weak_arm_support': ('(0, inf)', '... and the added arm explains at least this many vehicle '
+                         'passages, of as many tracks that came within weak_arm_box of the center'),
+    'weak_arm_box': ('(0, inf)', 'a track of an added arm comes this close to the center (the '
+                     'road leads to the junction) [m]'),
     'side_by_side_cap': ('[0, 1000]', 'with at least this many trajectory parts compared side by '
                          'side, an arm direction has at most one lane beyond those they show '
                          '(0: no cap; topology/side_by_side.py)'),
@@ -306,6 +313,9 @@ class TopologyConfig:
     # reported estimate
     side_by_side_overlap: float = 8.0
     side_by_side_cap: int = 4
+    weak_arm_nats: float = 1.0
+    weak_arm_support: float = 1.0
+    weak_arm_box: float = 25.0
     # anytime API
     chunk: int = 500
     converge_window: int = 2000

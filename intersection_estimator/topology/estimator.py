@@ -278,9 +278,10 @@ class TopologyEstimator:
         return obs
 
     def _window_tracks(self):
-        """The window's trajectories for :mod:`.side_by_side` (None: no tracked objects or
-        the step is off), grouped once per window."""
-        if not (self._tracked and self.cfg.side_by_side_overlap > 0):
+        """The window's trajectories for :mod:`.weak_arms` and :mod:`.side_by_side` (None:
+        no tracked objects or both steps off), grouped once per window."""
+        cfg = self.cfg
+        if not (self._tracked and (cfg.side_by_side_overlap > 0 or cfg.weak_arm_nats > 0)):
             return None
         if self._tracks is None:
             self._tracks = tracks_of(self._dets, self.cfg.weak_labels, self.cfg.min_track_speed)

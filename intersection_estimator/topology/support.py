@@ -9,7 +9,9 @@ heading voxels count detections per passage, ``ObservationSet.passages``). The d
 windows, docs/tuning.md) and drops a single aligned part. An arm's confidence is
 ``1 - exp(-passages / 3)``.
 
-With the window's trajectories the lane counts of the state left are then set by what
+In windows with trajectories, arms that the posterior nearly pays for are then added
+(:mod:`.weak_arms`: a road one vehicle drove, its part explained by no arm). With the
+window's trajectories the lane counts of the state left are then set by what
 overlapping trajectory parts show side by side (:mod:`.side_by_side`: at least the lanes
 shown, and at most one more once enough parts were compared), the changed arms' gap, width
 and offset refitted; the log posterior reported is that of the changed state.
@@ -23,6 +25,7 @@ from .mcmc import Posterior
 from .moves import remove_arm_at
 from .side_by_side import Tracks, fit_counts
 from .state import NARMS
+from .weak_arms import add_weak_arms
 
 __all__ = ['arm_support', 'reported']
 
@@ -42,8 +45,9 @@ def arm_support(post: Posterior, S: np.ndarray, clutter_floor: float) -> np.ndar
 def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks | None = None):
     """``(state, confidence per arm, log posterior)`` of the estimate reported for the MAP
     state ``S`` of log posterior ``lpost``; ``cfg``: a :class:`.config.TopologyConfig`.
-    With the window's ``tracks`` the lane counts are set by what the traffic shows side by
-    side (:mod:`.side_by_side`)."""
+    With the window's ``tracks`` arms the posterior nearly pays for are added
+    (:mod:`.weak_arms`) and the lane counts are set by what the traffic shows side by side
+    (:mod:`.side_by_side`)."""
     S = S.copy()
     sup = arm_support(post, S, cfg.clutter_floor)
     changed = False
@@ -56,6 +60,9 @@ def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks |
         changed = True
     if changed:
         lpost = post(S)
+    if tracks is not None:
+        S, lpost = add_weak_arms(post, S, lpost, cfg, tracks)
+        sup = arm_support(post, S, cfg.clutter_floor)
     if len(post.obs):
         S, raised = fit_counts(post, S, tracks, cfg)
         if raised is not None:

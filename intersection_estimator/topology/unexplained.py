@@ -59,16 +59,19 @@ def _directions(obs, center) -> np.ndarray:
     return np.where(obs.has_o, axis, pos)
 
 
-def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: int = 2) -> list:
+def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: int = 2,
+                       min_support: float | None = None) -> list:
     """Directions [rad] of up to ``max_angles`` groups of unexplained observations of state
     ``S`` (module doc, step 1), strongest first; ``cfg`` a :class:`.config.TopologyConfig`
     (``clutter_floor``, ``descent_add_support``, ``min_sep_deg``, ``max_arms``). A group
     counts if some angle within :data:`SEARCH` of its direction keeps ``min_sep`` from
     every arm (its traffic's directions lean towards a neighbour arm near the box). ``C``:
-    the columns of ``S`` if at hand (:meth:`.mcmc.Posterior.loglik`)."""
+    the columns of ``S`` if at hand (:meth:`.mcmc.Posterior.loglik`); ``min_support``: the
+    passages a group needs (None: ``descent_add_support``)."""
     obs = post.obs
     n = int(S[NARMS])
-    if len(obs) == 0 or cfg.descent_add_support <= 0 or n >= min(cfg.max_arms, MAXA):
+    need = cfg.descent_add_support if min_support is None else min_support
+    if len(obs) == 0 or need <= 0 or n >= min(cfg.max_arms, MAXA):
         return []
     if C is None:
         _, C = post.loglik(S)
@@ -83,7 +86,7 @@ def unexplained_angles(S: np.ndarray, post: Posterior, cfg, C=None, max_angles: 
     while len(out) < max_angles and left.any():
         mass = (near & left[None, :]) @ w * left
         j = int(np.argmax(mass))
-        if mass[j] < cfg.descent_add_support:
+        if mass[j] < need:
             break
         grp = near[j] & left
         phi = math.atan2(float(w[grp] @ np.sin(ang[grp])), float(w[grp] @ np.cos(ang[grp])))
