@@ -173,6 +173,8 @@ RANGES = {
     'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
                              'overlapping by this many metres show side by side (0: off; '
                              'topology/side_by_side.py) [m]'),
+    'side_by_side_single': (None, 'an arm direction in which no two trajectory parts overlap '
+                            'side by side keeps one lane (topology/side_by_side.py)'),
     'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
                       'trajectory parts are and the state with it is at most this many nats '
                       'below the state without (0: off; topology/weak_arms.py) [nats]'),
@@ -313,6 +315,7 @@ class TopologyConfig:
     # reported estimate
     side_by_side_overlap: float = 8.0
     side_by_side_cap: int = 4
+    side_by_side_single: bool = True
     weak_arm_nats: float = 1.0
     weak_arm_support: float = 1.0
     weak_arm_box: float = 25.0

@@ -18,7 +18,12 @@ refits its gap, width and axis offset for the new counts
 * an upper bound of one lane more than shown, once ``side_by_side_cap`` (4) parts were
   compared: on a curved approach the straight lane rays need an extra lane to cover the
   means' drift, which side by side shows as one lane. Lowering to the lanes shown lost more
-  than it fixed: lanes that no pair of vehicles drove at one stretch are not visible here.
+  than it fixed: lanes that no pair of vehicles drove at one stretch are not visible here;
+* one lane where no two parts overlap at all (``side_by_side_single``): nothing shows a
+  lane beside another, and the lanes the MAP keeps there pay for the spread of a few short
+  parts' means (leaving parts that end a few metres beyond the box, on an arm the recording
+  cuts short). Offline on the SUMO dev directions it fixed 16 and broke 1; Table I never has
+  such a direction with more than one lane.
 
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
@@ -262,10 +267,13 @@ def side_by_side(T: np.ndarray, w: float, min_overlap: float) -> tuple[int, int]
 def counted(n: int, shown: int, compared: int, cfg) -> int:
     """Lane count of one arm direction given the MAP's ``n``, the lanes ``shown`` side by
     side and the parts ``compared``: at least ``shown`` (up to ``max_lanes``); with at least
-    ``side_by_side_cap`` parts compared and a lane shown, at most one lane beyond them."""
+    ``side_by_side_cap`` parts compared and a lane shown, at most one lane beyond them;
+    with ``side_by_side_single`` and no two parts side by side (nothing shown), one lane."""
     want = min(cfg.max_lanes, max(n, shown))
     if cfg.side_by_side_cap > 0 and compared >= cfg.side_by_side_cap and shown >= 1:
         want = min(want, shown + 1)
+    if cfg.side_by_side_single and shown == 0:
+        want = max(cfg.min_lanes, min(want, 1))
     return want
 
 

@@ -13,7 +13,8 @@ In windows with trajectories, arms that the posterior nearly pays for are then a
 (:mod:`.weak_arms`: a road one vehicle drove, its part explained by no arm). With the
 window's trajectories the lane counts of the state left are then set by what
 overlapping trajectory parts show side by side (:mod:`.side_by_side`: at least the lanes
-shown, and at most one more once enough parts were compared), the changed arms' gap, width
+shown, at most one more once enough parts were compared, one lane where no two parts
+overlap), the changed arms' gap, width
 and offset refitted; the log posterior reported is that of the changed state.
 """
 

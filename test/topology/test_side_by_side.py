@@ -8,6 +8,7 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
+from intersection_estimator.observations import Detections
 from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, counted,
                                                           entering_rows, fit_counts,
@@ -16,7 +17,7 @@ from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, co
 from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, pack_state
 from intersection_estimator.topology.support import reported
 
-from .scenes import EASY, scene, tracked_posterior
+from .scenes import EASY, scene, tracked_posterior, trajectories
 
 CFG = TopologyConfig(chains_tracked=1)
 W = 3.5
@@ -63,17 +64,52 @@ def test_the_parts_compared_are_counted():
     assert side_by_side(T[:1], W, 8.0) == (0, 0)
 
 
-@pytest.mark.parametrize('n,shown,compared,cap,want', [
-    (1, 2, 4, 4, 2),          # raised to what is shown
-    (4, 1, 4, 4, 2),          # at most one lane beyond it, once 4 parts were compared
-    (4, 1, 3, 4, 4),          # too few parts compared: the MAP's count stands
-    (4, 1, 9, 0, 4),          # no cap
-    (2, 0, 9, 4, 2),          # nothing shown: nothing capped
-    (9, 9, 9, 4, 6),          # never beyond max_lanes
+@pytest.mark.parametrize('n,shown,compared,cap,single,want', [
+    (1, 2, 4, 4, True, 2),          # raised to what is shown
+    (4, 1, 4, 4, True, 2),          # at most one lane beyond it, once 4 parts were compared
+    (4, 1, 3, 4, True, 4),          # too few parts compared: the MAP's count stands
+    (4, 1, 9, 0, True, 4),          # no cap
+    (3, 0, 0, 4, True, 1),          # no two parts side by side: one lane
+    (3, 0, 0, 4, False, 3),         # ... unless switched off: the MAP's count stands
+    (1, 0, 0, 4, True, 1),
+    (9, 9, 9, 4, True, 6),          # never beyond max_lanes
 ])
-def test_counted(n, shown, compared, cap, want):
-    cfg = replace(CFG, side_by_side_cap=cap)
+def test_counted(n, shown, compared, cap, single, want):
+    cfg = replace(CFG, side_by_side_cap=cap, side_by_side_single=single)
     assert counted(n, shown, compared, cfg) == want
+
+
+def test_an_arm_direction_without_parts_side_by_side_keeps_one_lane():
+    """Arm 3's leaving parts, all but one dropped: nothing is shown side by side, so a
+    state with 3 leaving lanes there is lowered to 1 and refitted; off, it stands."""
+    gt = EASY[0]
+    post = tracked_posterior(CFG, gt)
+    dets = scene(gt, 'tracked', seed=3, clutter=10)
+    tr = tracks_of(dets)
+    S = pack_state(gt)
+    _, T_out = arm_profiles(S, 3, tr, nearest_arm(S, tr.xy), entering_rows(S, tr), 12.0, 75.0)
+    assert side_by_side(T_out, gt.arms[3].lane_width, 8.0)[0] == 2
+    rng = np.random.default_rng(3)
+    out3 = gt.arms[3].direction
+    paths, seen = [], 0
+    for xy, hd in trajectories(gt, rng, per_lane=2):
+        leaves3 = (xy[-1] - gt.center) @ out3 > 40.0
+        seen += leaves3
+        if not leaves3 or seen == 1:           # one vehicle leaves on arm 3
+            paths.append(Detections.make(xy + rng.normal(0, 0.3, xy.shape),
+                                         np.arange(len(xy)) * 0.1, heading=hd,
+                                         track_id=len(paths)))
+    assert seen >= 2
+    lone = tracks_of(Detections.concat(paths))
+    more = S.copy()
+    more[HDR + 3 * STRIDE + NOUT] = 3
+    _, T_lone = arm_profiles(more, 3, lone, nearest_arm(more, lone.xy),
+                             entering_rows(more, lone), 12.0, 75.0)
+    assert side_by_side(T_lone, gt.arms[3].lane_width, 8.0)[0] == 0
+    S2, lp = fit_counts(post, more.copy(), lone, CFG)
+    assert lp is not None and S2[HDR + 3 * STRIDE + NOUT] == 1
+    kept, lp = fit_counts(post, more.copy(), lone, replace(CFG, side_by_side_single=False))
+    assert kept[HDR + 3 * STRIDE + NOUT] == 3
 
 
 def test_parts_that_do_not_overlap_show_nothing():
