@@ -105,7 +105,18 @@ def _listen(args, env):
         for p in procs:
             if p.poll() is None:
                 p.terminate()
-                p.wait(10)
+                t_term = time.monotonic()
+                try:
+                    p.wait(30)
+                    if time.monotonic() - t_term > 5.0:
+                        print(f'measure_node: {Path(p.args[0]).name} took '
+                              f'{time.monotonic() - t_term:.1f} s to stop after SIGTERM',
+                              file=sys.stderr)
+                except subprocess.TimeoutExpired:     # reported, never left running
+                    print(f'measure_node: {Path(p.args[0]).name} still running 30 s after '
+                          'SIGTERM: killed', file=sys.stderr)
+                    p.kill()
+                    p.wait()
         node.destroy_node()
         ctx.try_shutdown()
     return diags, topos, t_play, n_arms, changes
