@@ -314,7 +314,7 @@ class TopologyConfig:
     descent_add_support: float = 1.5
     # reported estimate
     side_by_side_overlap: float = 8.0
-    side_by_side_cap: int = 4
+    side_by_side_cap: int = 2
     side_by_side_single: bool = True
     weak_arm_nats: float = 1.0
     weak_arm_support: float = 1.0
