@@ -173,18 +173,19 @@ RANGES = {
     'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
                              'overlapping by this many metres show side by side (0: off; '
                              'topology/side_by_side.py) [m]'),
+    'side_by_side_cap': ('[0, 1000]', 'with at least this many trajectory parts compared side by '
+                         'side, an arm direction has at most one lane beyond those they show '
+                         '(0: no cap; topology/side_by_side.py)'),
     'side_by_side_single': (None, 'an arm direction in which no two trajectory parts overlap '
                             'side by side keeps one lane (topology/side_by_side.py)'),
     'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
                       'trajectory parts are and the state with it is at most this many nats '
                       'below the state without (0: off; topology/weak_arms.py) [nats]'),
     'weak_arm_support': ('(0, inf)', '... and the added arm explains at least this many vehicle '
-                         'passages, of as many tracks that came within weak_arm_box of the center'),
-    'weak_arm_box': ('(0, inf)', 'a track of an added arm comes this close to the center (the '
-                     'road leads to the junction) [m]'),
-    'side_by_side_cap': ('[0, 1000]', 'with at least this many trajectory parts compared side by '
-                         'side, an arm direction has at most one lane beyond those they show '
-                         '(0: no cap; topology/side_by_side.py)'),
+                         'passages, and as many tracks drive it across the line weak_arm_box '
+                         'out on its axis'),
+    'weak_arm_box': ('(part_outside, inf)', 'the tracks of an added arm drive it across the line this far '
+                     'out on its axis: the road leads to the junction [m]'),
     # anytime API
     'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
     'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),

@@ -16,7 +16,7 @@ refits its gap, width and axis offset for the new counts
 
 * a lower bound, kept where the part means alone would pay for fewer lanes;
 * an upper bound of one lane more than shown, once ``side_by_side_cap`` (2) parts were
-  compared (4 until the weak-arm release; 2 gained 2 SUMO dev and 1 held-out case): on a curved approach the straight lane rays need an extra lane to cover the
+  compared: on a curved approach the straight lane rays need an extra lane to cover the
   means' drift, which side by side shows as one lane. Lowering to the lanes shown lost more
   than it fixed: lanes that no pair of vehicles drove at one stretch are not visible here;
 * one lane where no two parts overlap at all (``side_by_side_single``): nothing shows a

@@ -6,13 +6,16 @@ recorded window. Its trajectory part is then explained by no arm (below the clut
 floor) and the state with the arm, refitted, scores only a little lower: on the SUMO dev
 seeds 0-199 (tracked) the nine candidates within 1.3 nats of the MAP all lie on a true arm
 the MAP lacks (seven of them driven by one vehicle), the first candidate that lies on no
-true arm is 1.46 nats behind, and on Table I 0-199 none is closer than 1.9 nats
+true arm is 1.46 nats behind, and on Table I 0-599 none is closer than 1.56 nats
 (docs/real_junctions.md, "Arms one vehicle drove").
 
 :func:`add_weak_arms` adds, strongest first, the arms of :func:`.unexplained.best_new_arm`
 over groups of unexplained trajectory parts of at least ``weak_arm_support`` vehicle
 passages, while the state with the arm is at most ``weak_arm_nats`` below the state
-without it and the new arm explains that many passages itself. It runs on the reported
+without it, the new arm explains that many passages itself and as many tracks drive it
+across the line ``weak_arm_box`` (25 m) out on its axis (:func:`box_tracks`: a road leads
+to the junction; without the line, false tracks 45-60 m out made two Table I arms in 1000
+cases). It runs on the reported
 state, after the arms without support were dropped (:mod:`.support`); an added arm's
 confidence is that of its passages (one vehicle: 0.28). Only windows with trajectories:
 radar and heading voxels of one vehicle are too coarse to place a road.

@@ -127,3 +127,9 @@ def test_the_reported_estimate_takes_the_arm_with_tracks_only():
     assert int(S2[NARMS]) == 4 and lpost == pytest.approx(post(S2))
     assert len(conf) == 4 and 0.0 < min(conf) < 0.5      # one passage: a weak arm
     assert int(reported(post, S, post(S), cfg)[0][NARMS]) == 3
+
+
+def test_a_box_line_inside_part_outside_is_refused_by_name():
+    with pytest.raises(ValueError, match='weak_arm_box'):
+        TopologyConfig(weak_arm_box=10.0).validate()        # part_outside is 12 m
+    TopologyConfig(weak_arm_box=30.0).validate()
