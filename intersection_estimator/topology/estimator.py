@@ -284,7 +284,7 @@ class TopologyEstimator:
         if not (self._tracked and (cfg.side_by_side_overlap > 0 or cfg.weak_arm_nats > 0)):
             return None
         if self._tracks is None:
-            self._tracks = tracks_of(self._dets, self.cfg.weak_labels, self.cfg.min_track_speed)
+            self._tracks = tracks_of(self._dets, cfg.weak_labels, cfg.min_track_speed)
         return self._tracks
 
     def _advance(self, m: int, deadline: float) -> int:

@@ -45,7 +45,7 @@ from .preprocess import moving_tracks
 from .refit import refit_lane_candidates
 from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
 
-__all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_profiles',
+__all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_frame', 'arm_profiles',
            'lanes_side_by_side', 'side_by_side', 'counted', 'fit_counts']
 
 #: station step of the lateral profiles [m]
@@ -131,6 +131,18 @@ def entering_rows(S, tr: Tracks) -> np.ndarray:
     return np.arange(len(r2)) <= split[tr.tix]
 
 
+def arm_frame(S, k, xy: np.ndarray, h: np.ndarray):
+    """``(s, t, c)`` of rows ``xy`` with unit headings ``h`` in the straight frame of arm
+    ``k`` of ``S``: distance along its axis from the axis origin, lateral offset (left
+    positive) and the cosine between heading and axis."""
+    a = S[HDR + k * STRIDE + ANG]
+    ux, uy = math.cos(a), math.sin(a)
+    ox, oy = arm_origin(S, k, ux, uy)
+    return ((xy[:, 0] - ox) * ux + (xy[:, 1] - oy) * uy,
+            (xy[:, 1] - oy) * ux - (xy[:, 0] - ox) * uy,
+            h[:, 0] * ux + h[:, 1] * uy)
+
+
 def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: float,
                  traffic_side: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Lateral profiles of the trajectory parts on arm ``k`` of ``S``, entering and
@@ -140,15 +152,10 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
     part's way, beyond ``inner`` and within ``REACH`` lane widths beyond the arm's lanes
     of that direction (the likelihood's lateral coordinate,
     :func:`.likelihood._closest_lane`)."""
-    a = S[HDR + k * STRIDE + ANG]
-    ux, uy = math.cos(a), math.sin(a)
-    ox, oy = arm_origin(S, k, ux, uy)
     grid = np.arange(inner, outer, STEP)
     mine = np.flatnonzero(arm_of_row == k)
-    xy, h, tix, entering = tr.xy[mine], tr.h[mine], tr.tix[mine], entering[mine]
-    s = (xy[:, 0] - ox) * ux + (xy[:, 1] - oy) * uy
-    t = (xy[:, 1] - oy) * ux - (xy[:, 0] - ox) * uy
-    c = h[:, 0] * ux + h[:, 1] * uy
+    tix, entering = tr.tix[mine], entering[mine]
+    s, t, c = arm_frame(S, k, tr.xy[mine], tr.h[mine])
     i0 = HDR + k * STRIDE
     w, hg = S[i0 + WID], 0.5 * S[i0 + GAP]
     base = (s >= inner) & (np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))

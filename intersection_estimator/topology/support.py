@@ -26,21 +26,10 @@ from .mcmc import Posterior
 from .moves import remove_arm_at
 from .side_by_side import Tracks, fit_counts
 from .state import NARMS
+from .unexplained import arm_support
 from .weak_arms import add_weak_arms
 
 __all__ = ['arm_support', 'reported']
-
-
-def arm_support(post: Posterior, S: np.ndarray, clutter_floor: float) -> np.ndarray:
-    """Per arm of ``S``: the vehicle passages it explains best (above the clutter floor)."""
-    n = int(S[NARMS])
-    if len(post.obs) == 0 or n == 0:
-        return np.zeros(n)
-    _, C = post.loglik(S)
-    Cn = C[:n]
-    best = Cn.argmax(axis=0)
-    good = Cn.max(axis=0) > clutter_floor
-    return np.bincount(best[good], post.obs.passages[good], n)
 
 
 def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks | None = None):
@@ -62,8 +51,9 @@ def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks |
     if changed:
         lpost = post(S)
     if tracks is not None:
-        S, lpost = add_weak_arms(post, S, lpost, cfg, tracks)
-        sup = arm_support(post, S, cfg.clutter_floor)
+        S2, lpost = add_weak_arms(post, S, lpost, cfg, tracks)
+        if S2 is not S:                       # an arm was added
+            S, sup = S2, arm_support(post, S2, cfg.clutter_floor)
     if len(post.obs):
         S, raised = fit_counts(post, S, tracks, cfg)
         if raised is not None:

@@ -39,7 +39,7 @@ from .preprocess import _direction_class
 from .refit import refit_arm
 from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, STRIDE, WID, arm_angles, wrap
 
-__all__ = ['unexplained_angles', 'with_arm', 'best_new_arm', 'SEARCH']
+__all__ = ['arm_support', 'unexplained_angles', 'with_arm', 'best_new_arm', 'SEARCH']
 
 #: observations within this angle of a group's strongest direction join it [rad]
 HALF_WIDTH = math.radians(12.0)
@@ -47,6 +47,21 @@ HALF_WIDTH = math.radians(12.0)
 #: biased near the box (turning traffic, an offset axis), by 8-11 deg on SUMO seeds 42, 174,
 #: and an arm 8 deg off its lanes scores below none
 SEARCH = np.radians(np.arange(-12.0, 12.1, 2.0))
+
+
+def arm_support(post: Posterior, S: np.ndarray, clutter_floor: float, C=None) -> np.ndarray:
+    """Per arm of ``S``: the vehicle passages it explains best (above the clutter floor;
+    what no arm explains is :func:`unexplained_angles`' to group). ``C``: the columns of
+    ``S`` if at hand (:meth:`.mcmc.Posterior.loglik`)."""
+    n = int(S[NARMS])
+    if len(post.obs) == 0 or n == 0:
+        return np.zeros(n)
+    if C is None:
+        _, C = post.loglik(S)
+    Cn = C[:n]
+    best = Cn.argmax(axis=0)
+    good = Cn.max(axis=0) > clutter_floor
+    return np.bincount(best[good], post.obs.passages[good], n)
 
 
 def _directions(obs, center) -> np.ndarray:

@@ -29,20 +29,11 @@ import math
 import numpy as np
 
 from .mcmc import Posterior
-from .side_by_side import ALIGN_DEG, REACH, Tracks
-from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
-from .unexplained import best_new_arm, unexplained_angles
+from .side_by_side import ALIGN_DEG, REACH, Tracks, arm_frame
+from .state import GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID
+from .unexplained import arm_support, best_new_arm, unexplained_angles
 
 __all__ = ['add_weak_arms', 'box_tracks']
-
-
-def _support_of_last(post: Posterior, S: np.ndarray, floor: float) -> float:
-    """Vehicle passages that the last arm of ``S`` explains best (above ``floor``)."""
-    _, C = post.loglik(S)
-    n = int(S[NARMS])
-    best = C[:n].argmax(axis=0)
-    good = (best == n - 1) & (C[:n].max(axis=0) > floor)
-    return float(post.obs.passages[good].sum())
 
 
 def box_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float) -> int:
@@ -52,12 +43,9 @@ def box_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float) ->
     and ``box`` metres out and beyond. The road leads to the junction: a false track far
     out does not cross, nor does a vehicle of a neighbouring arm (another heading)."""
     i0 = HDR + k * STRIDE
-    ux, uy = math.cos(S[i0 + ANG]), math.sin(S[i0 + ANG])
-    ox, oy = arm_origin(S, k, ux, uy)
-    s = (tr.xy[:, 0] - ox) * ux + (tr.xy[:, 1] - oy) * uy
-    t = (tr.xy[:, 1] - oy) * ux - (tr.xy[:, 0] - ox) * uy
+    s, t, c = arm_frame(S, k, tr.xy, tr.h)
     reach = 0.5 * S[i0 + GAP] + (max(S[i0 + NIN], S[i0 + NOUT]) + REACH) * S[i0 + WID]
-    on = ((np.abs(tr.h[:, 0] * ux + tr.h[:, 1] * uy) >= math.cos(math.radians(ALIGN_DEG)))
+    on = ((np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))
           & (np.abs(t) <= reach) & (s >= outside))
     n = int(tr.tix[-1]) + 1 if len(tr.tix) else 0
     near = np.bincount(tr.tix[on & (s <= box)], minlength=n) > 0
@@ -69,20 +57,22 @@ def add_weak_arms(post: Posterior, S: np.ndarray, lpost: float, cfg,
                   tracks: Tracks) -> tuple[np.ndarray, float]:
     """``(S, log posterior)`` with the arms added that the posterior nearly pays for
     (module doc) given the window's ``tracks``; ``cfg`` a :class:`.config.TopologyConfig`.
-    ``S`` unchanged when ``weak_arm_nats`` is 0 or no candidate qualifies."""
+    The same array ``S`` when ``weak_arm_nats`` is 0 or no candidate qualifies."""
     if cfg.weak_arm_nats <= 0 or len(post.obs) == 0:
         return S, lpost
     while True:
+        _, C = post.loglik(S)                 # S's columns, shared by every candidate
         best = None
-        for phi in unexplained_angles(S, post, cfg, max_angles=3,
+        for phi in unexplained_angles(S, post, cfg, C, max_angles=3,
                                       min_support=cfg.weak_arm_support):
-            S2 = best_new_arm(S, phi, post, cfg)
+            S2 = best_new_arm(S, phi, post, cfg, C)
             if S2 is None:
                 continue
-            L2 = post(S2)
+            ll2, C2 = post.loglik(S2)
+            L2 = ll2 + post.log_prior(S2)
             k = int(S2[NARMS]) - 1
             if (L2 >= lpost - cfg.weak_arm_nats and (best is None or L2 > best[1])
-                    and _support_of_last(post, S2, cfg.clutter_floor) >= cfg.weak_arm_support
+                    and arm_support(post, S2, cfg.clutter_floor, C2)[k] >= cfg.weak_arm_support
                     and box_tracks(S2, k, tracks, cfg.part_outside, cfg.weak_arm_box)
                     >= cfg.weak_arm_support):
                 best = (S2, L2)
