@@ -24,8 +24,8 @@ from intersection_estimator.pipeline import estimate
 from intersection_estimator.topology import TopologyConfig
 
 KEYS = ('arm_accuracy', 'topology_accuracy', 'topology_observed_accuracy', 'center_error_m_mean',
-        'lane_error_cm_mean', 'floor_cm_mean', 'lane_error_cm_mean_connector', 'lane_recall',
-        'lane_precision')
+        'lane_error_cm_mean', 'floor_cm_mean', 'lane_error_cm_mean_entering',
+        'lane_error_cm_mean_leaving', 'lane_error_cm_mean_connector', 'lane_recall', 'lane_precision')
 SECTIONS = {'topology': TopologyConfig, 'lanes': LaneConfig}
 
 

@@ -91,7 +91,9 @@ def test_curved_approach_follows_the_traffic():
     after = _errors(specs, index, stop, radius)
     assert max(after) < 0.3 and max(after) < 0.25 * min(before), (before, after)
     _connectors_meet(specs)
-    # the lanes keep their width across the bend (borders offset along the curve's normal)
+    # with the common shift alone the lanes keep their width across the bend (borders
+    # offset along the curve's normal); per-lane deviations may move each lane a little
+    specs, index = _specs(trajs, replace(ON, follow_per_lane=0))
     E = specs[index[(0, 1, 0)]]
     w = np.linalg.norm(E.left - E.right, axis=1)
     assert np.ptp(w) < 0.05, w
@@ -167,3 +169,44 @@ def test_a_bent_arm_reaches_the_lane_step_as_its_chord():
     want = math.atan2(30 * math.sin(math.radians(30)), 20 + 30 * math.cos(math.radians(30)))
     assert east.angle == pytest.approx(want) and east.bend == 0.0 and east.bend_at == 0.0
     assert [a.angle for a in out.arms if a is not east] == [-2.0, 2.0]
+
+
+def test_parts_reassigned_along_the_bent_axis():
+    """``follow_reassign``: parts that the straight rays gave the neighbouring lane (on a
+    bend the mean offset from a straight ray depends on where the part was seen) go back
+    to the lane their offset from the shifted axis says, and the lane course improves;
+    parts already right stay. Off: the assignment is left as it was."""
+    radius = 140.0
+    trajs, stop = _trajs((0, 1), radius, np.random.default_rng(5), per_lane=8)
+    truth = [tr.lane_in for tr in trajs]
+    for tr in trajs[:2] + trajs[8:10]:           # two parts of each lane on the other one
+        tr.lane_in = (0, 1 - tr.lane_in[1])
+    before = [tr.lane_in for tr in trajs]
+    err_off = _errors(*_specs(trajs, replace(ON, follow_reassign=0)), stop, radius)
+    assert [tr.lane_in for tr in trajs] == before
+    specs, index = _specs(trajs, ON)                # on by default
+    assert [tr.lane_in for tr in trajs] == truth
+    err_on = _errors(specs, index, stop, radius)
+    assert max(err_on) < max(err_off), (err_off, err_on)
+    _connectors_meet(specs)
+
+
+def test_nearest_lanes_measures_along_the_shifted_axis():
+    """A part far out on the bend sits metres beside its lane's straight ray but on its
+    lane along the shifted axis; a part without points in range is -1."""
+    from intersection_estimator.lanes.follow import arm_shift, driven_lanes, nearest_lanes
+    from intersection_estimator.lanes.init import arm_frames
+    radius = 140.0
+    trajs, stop = _trajs((0, 1), radius, np.random.default_rng(6), per_lane=6)
+    topo = _topology()
+    f = fit_frames(topo, trajs, stop_distances(topo, ON), ON)[0]
+    lats = [f.lat[(1, k)] for k in (0, 1)]
+    parts = [[tr.xy[:tr.split + 1] for tr in trajs if tr.lane_in == (0, k)] for k in (0, 1)]
+    g = arm_shift(f, lats, driven_lanes(parts, f, stop, stop + 70.0, ON), stop, stop + 70.0, ON)
+    assert g is not None
+    far = [_approach(LAT[k], stop, radius)[:25] for k in (0, 1)]     # 45-70 m out
+    straight = [(P - f.origin) @ f.n for P in far]
+    assert abs(np.mean(straight[0]) - lats[0]) > abs(lats[1] - lats[0])   # the ray is wrong
+    got = nearest_lanes(f, g, lats, far + [np.zeros((0, 2))], stop, stop + 70.0, ON)
+    assert got.tolist() == [0, 1, -1]
+    assert arm_frames(topo)[0].u @ f.u > 0.99

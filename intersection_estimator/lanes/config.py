@@ -50,6 +50,8 @@ _RANGES = {
     'follow_corr_length': ('[0.01, 1000.0]', 'metres of one vehicle\'s path that count as one '
                            'observation in the selection [m]'),
     'follow_per_lane': ('[0, 1]', '1: each lane with traffic also gets its own deviation'),
+    'follow_reassign': ('[0, 1]', '1: the parts of a bent direction are re-assigned to its lanes '
+                        'by their offset from the shifted axis'),
     'stop_fit': ('[0, 1]', '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': ('[0.0, 20.0]', 'search range around the geometric stop distance [m]'),
     'stop_step': ('[0.01, 5.0]', 'grid step of the stop-distance search [m]'),
@@ -137,7 +139,8 @@ class LaneConfig:
     follow_stop_margin: float = 0.0
     follow_max_weight: float = 3.0
     follow_corr_length: float = 4.0
-    follow_per_lane: int = 0
+    follow_per_lane: int = 1
+    follow_reassign: int = 1
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25

@@ -36,10 +36,15 @@ Per arm and driving direction (the straight frame ``origin + s u + lat n`` of
    offset along its unit normal ``N`` by their lateral positions, so the lanes keep their
    widths across the bend and stay parallel: a lane without traffic moves with its
    traffic-carrying neighbours;
-5. optionally (``follow_per_lane``) each lane with traffic also gets its own deviation
-   ``e_k`` from the reference curve (same fit and selection, on its points' signed
-   offsets from ``R``); a lane without traffic copies the deviation of its nearest
-   traffic-carrying neighbour; a border between two lanes takes the mean of theirs.
+5. (``follow_per_lane``, on) each lane with traffic also gets its own deviation ``e_k``
+   from the reference curve (same fit and selection, on its points' signed offsets from
+   ``R``; not selected: none); a lane without traffic copies the deviation of its
+   nearest traffic-carrying neighbour; a border between two lanes takes the mean of theirs;
+6. (``follow_reassign``, on) before 4-5, where the direction bends, its trajectory parts
+   are re-assigned to its lanes by their offset from ``R`` (:func:`nearest_lanes`):
+   §III-A's assignment by the offset from straight rays mixes neighbouring lanes' parts
+   on a bend. The new assignment is the trajectories' own
+   (``Trajectory.lane_in`` / ``lane_out``), so connectors and the MCMC use it too.
 
 Only the entering/leaving geometry changes (station count, sharing keys and neighbour
 pairs stay those of the straight lanes); connectors are built afterwards from the moved
@@ -49,13 +54,18 @@ knows how the simulators draw their roads: the curve is a generic smoothing spli
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.interpolate import BSpline
-from scipy.spatial import cKDTree
 
 from .spline import _data, aic_prefers, moving_average, second_differences
 
-__all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'arm_shift', 'follow_borders']
+#: Gauss-Newton steps of the foot point on the shifted axis (:func:`_signed_offsets`)
+FOOT_STEPS = 2
+
+__all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'nearest_lanes', 'driven_lanes',
+           'arm_shift', 'follow_borders']
 
 
 class OffsetFit:
@@ -64,14 +74,22 @@ class OffsetFit:
 
     def __init__(self, spline: BSpline, edf: float, lo: float, hi: float):
         self.spline, self.edf, self.lo, self.hi = spline, edf, lo, hi
-        self._d = spline.derivative()
-        self._d_lo, self._d_hi = float(self._d(lo)), float(self._d(hi))
+        self._d = None            # the derivative, built on first use (most fits are not)
+
+    def _deriv(self) -> BSpline:
+        if self._d is None:
+            self._d = self.spline.derivative()
+        return self._d
 
     def __call__(self, s) -> np.ndarray:
         s = np.asarray(s, float)
-        return (self.spline(np.clip(s, self.lo, self.hi))
-                + np.minimum(s - self.lo, 0.0) * self._d_lo
-                + np.maximum(s - self.hi, 0.0) * self._d_hi)
+        out = self.spline(np.clip(s, self.lo, self.hi))
+        below, above = s < self.lo, s > self.hi
+        if below.any() or above.any():
+            d = self._deriv()
+            out = (out + np.minimum(s - self.lo, 0.0) * float(d(self.lo))
+                   + np.maximum(s - self.hi, 0.0) * float(d(self.hi)))
+        return out
 
     def plus(self, other: 'OffsetFit') -> 'OffsetFit':
         """``g + other`` (same knots): a correction fitted in the frame of ``g``."""
@@ -80,7 +98,16 @@ class OffsetFit:
 
     def slope(self, s) -> np.ndarray:
         """dg/ds (dimensionless); constant beyond the fitted range."""
-        return self._d(np.clip(s, self.lo, self.hi))
+        return self._deriv()(np.clip(s, self.lo, self.hi))
+
+
+@lru_cache(maxsize=64)
+def _penalty(n: int) -> np.ndarray:
+    """``D'D`` of the second differences of ``n`` coefficients (read-only)."""
+    D = second_differences(n)
+    out = D.T @ D
+    out.flags.writeable = False
+    return out
 
 
 def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing: float,
@@ -97,8 +124,7 @@ def fit_offset(s: np.ndarray, r: np.ndarray, lo: float, hi: float, ctrl_spacing:
     knots = np.r_[[lo] * 3, np.linspace(lo, hi, n - 2), [hi] * 3]
     BtB, Btr = _data(np.asarray(r, float).reshape(-1, 1), np.asarray(s, float), knots, w)
     Btr = Btr[:, 0]
-    D = second_differences(n)
-    H = BtB + (smooth * w.sum() / n) * (D.T @ D) + 1e-9 * np.eye(n)
+    H = BtB + (smooth * w.sum() / n) * _penalty(n) + 1e-9 * np.eye(n)
     coef = np.linalg.solve(H, Btr)
     if not np.all(np.isfinite(coef)):
         return None
@@ -217,26 +243,46 @@ def _reference(frame, g: OffsetFit | None, lo: float, hi: float, n_st: int):
 
 def _signed_offsets(P: np.ndarray, frame, g: OffsetFit | None, lo: float, hi: float):
     """(axis distance of the foot point, signed offset along ``N``) of points ``P`` from
-    the reference curve (dense, 0.25 m, extended 20 m beyond both ends); with ``g``
-    None the straight frame's ``(s, lat)``."""
+    the reference curve ``R(s) = origin + s u + g(s) n``, its foot point searched within 20 m
+    beyond both ends; with ``g`` None the straight frame's ``(s, lat)``.
+
+    In the straight frame a point is ``(s0, l0)``; its foot point on ``R`` solves
+    ``(s0 - s) + (l0 - g(s)) g'(s) = 0``, found by Gauss-Newton steps from ``s0``
+    (``FOOT_STEPS``: the offset is flat in the foot point to first order; two steps put it
+    within 0.1 mm of the exact one at slopes up to 2), and
+    its offset along the unit normal ``N = (n - g' u) / sqrt(1 + g'^2)`` is
+    ``((l0 - g) - g' (s0 - s)) / sqrt(1 + g'^2)``."""
+    rel = P - frame.origin
+    s0, l0 = rel @ frame.u, rel @ frame.n
     if g is None:
-        rel = P - frame.origin
-        return rel @ frame.u, rel @ frame.n
-    C, N, s = _reference(frame, g, lo - 20.0, hi + 20.0,
-                         max(64, int((hi - lo + 40.0) / 0.25) + 1))
-    _, i = cKDTree(C).query(P)
-    return s[i], np.einsum('ij,ij->i', P - C[i], N[i])
+        return s0, l0
+    s = np.clip(s0, lo - 20.0, hi + 20.0)
+    for _ in range(FOOT_STEPS):
+        d = g.slope(s)
+        s = np.clip(s + ((s0 - s) + (l0 - g(s)) * d) / (1.0 + d * d), lo - 20.0, hi + 20.0)
+    d = g.slope(s)
+    return s, ((l0 - g(s)) - d * (s0 - s)) / np.sqrt(1.0 + d * d)
+
+
+def _straight(s) -> np.ndarray:
+    """No deviation: the lane's own traffic follows the reference curve."""
+    return np.zeros(len(np.atleast_1d(s)))
 
 
 def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg):
     """(K, n) deviations ``e_k(s)`` [m] of each lane from the reference curve at axis
-    distances ``s``: its own selected fit, else its nearest traffic-carrying neighbour's,
-    else 0 (module docstring, step 5). Returns a function of ``s``."""
+    distances ``s``: with ``follow_min_points`` points its own selected fit, or none when
+    the fit is not selected (its traffic follows ``R``); with fewer its nearest such
+    neighbour's, else 0 (module docstring, step 5). Returns a function of ``s``."""
     fits: list = [None] * len(lats)
-    for k, (P, w) in enumerate(lanes):
-        if len(P):
-            sk, ok = _signed_offsets(P, frame, g, lo, hi)
-            fits[k] = select_offset(sk, ok - lats[k], lo, hi, cfg, w)
+    own = [k for k, (P, _) in enumerate(lanes) if len(P) >= cfg.follow_min_points]
+    if own:                          # one foot-point search for all lanes' points
+        s_all, off_all = _signed_offsets(np.concatenate([lanes[k][0] for k in own]), frame,
+                                         g, lo, hi)
+        cuts = np.cumsum([len(lanes[k][0]) for k in own])[:-1]
+        for k, sk, ok in zip(own, np.split(s_all, cuts), np.split(off_all, cuts)):
+            fit = select_offset(sk, ok - lats[k], lo, hi, cfg, lanes[k][1])
+            fits[k] = _straight if fit is None else fit
     have = [k for k, f in enumerate(fits) if f is not None]
 
     def dev(s):
@@ -250,15 +296,44 @@ def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg):
     return dev
 
 
-def arm_shift(frame, lats, parts, lo: float, hi: float, cfg) -> OffsetFit | None:
+def nearest_lanes(frame, g: OffsetFit, lats, parts, lo: float, hi: float, cfg) -> np.ndarray:
+    """Lane index of each trajectory part by its offset from the shifted axis ``R(s)``
+    (-1: no points between ``lo`` and ``hi``). §III-A assigns a part by its mean offset
+    from the *straight* lane rays; on a bent approach that mean depends on where along
+    the bend the part was seen, and parts of neighbouring lanes mix. Measured along the
+    normal of ``R``, the offset of one lane's traffic is the same at every station: each
+    part goes to the lane nearest its weighted (metres driven) mean offset."""
+    lats = np.asarray(lats, float)
+    out = np.full(len(parts), -1, np.int64)
+    pts = [_driven([p], frame, lo, hi, cfg) for p in parts]
+    n = np.array([len(P) for P, _ in pts])
+    if n.sum() == 0:
+        return out
+    _, off = _signed_offsets(np.concatenate([P for P, _ in pts]), frame, g, lo, hi)
+    w = np.concatenate([w for _, w in pts])
+    starts = np.r_[0, np.cumsum(n)[:-1]]
+    for i in np.flatnonzero(n):
+        sl = slice(starts[i], starts[i] + n[i])
+        ww = w[sl]
+        m = float(np.sum(ww * off[sl]) / ww.sum()) if ww.sum() > 0 else float(off[sl].mean())
+        out[i] = int(np.argmin(np.abs(lats - m)))
+    return out
+
+
+def driven_lanes(parts, frame, lo: float, hi: float, cfg) -> list:
+    """Per lane ``(points (m, 2), weights (m,) [m])`` of its trajectory parts between ``lo``
+    and ``hi`` (:func:`_driven`); ``parts``: per lane a list of parts ((m, 2), time order)."""
+    return [_driven(p, frame, lo, hi, cfg) for p in parts]
+
+
+def arm_shift(frame, lats, lanes, lo: float, hi: float, cfg) -> OffsetFit | None:
     """The selected common shift ``g(s)`` [m] of the given lanes (module docstring, steps
     1-3), or None (straight). ``lats``: their lateral positions [m] (the lanes of one
-    arm direction); ``parts``: per lane its assigned trajectory parts ((m, 2), time order)."""
-    lanes = [_driven(p, frame, lo, hi, cfg) for p in parts]
+    arm direction); ``lanes``: per lane its traffic (:func:`driven_lanes`)."""
     return _common_shift(frame, np.asarray(lats, float), lanes, lo, hi, cfg)
 
 
-def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, parts, cfg,
+def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, lanes, cfg,
                    g: OffsetFit | None):
     """Border polylines ``(K + 1, n_st, 2)`` of the ``K`` lanes of one arm direction,
     ordered from ``s = lo`` (stop line) to ``hi`` [m], offset from the axis shifted by
@@ -266,13 +341,11 @@ def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, parts,
     when that leaves them straight (module docstring, steps 4-5).
 
     ``lats``: (K,) lateral positions of the lane center lines [m]; ``borders``: (K + 1,)
-    lateral positions of their borders [m] (``init._border_positions``); ``parts``: per
-    lane the list of its assigned trajectory parts ((m, 2) points in time order; may be
-    empty)."""
+    lateral positions of their borders [m] (``init._border_positions``); ``lanes``: per
+    lane its traffic (:func:`driven_lanes`; may be empty)."""
     lats = np.asarray(lats, float)
     dev = None
     if cfg.follow_per_lane:
-        lanes = [_driven(p, frame, lo, hi, cfg) for p in parts]
         dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg)
     if g is None and dev is None:
         return None

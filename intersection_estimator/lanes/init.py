@@ -29,7 +29,7 @@ from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
-from .follow import arm_shift, follow_borders
+from .follow import arm_shift, driven_lanes, follow_borders, nearest_lanes
 from .spline import noise_variance, traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
@@ -357,28 +357,67 @@ def _lane_points(trajs) -> dict:
     return out
 
 
-def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg) -> dict:
+def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=()) -> tuple[dict, dict]:
     """direction -> common lateral shift of its lanes fitted to their traffic
-    (``lanes/follow.py``; None: straight)."""
+    (``lanes/follow.py``; None: straight), and direction -> that traffic per lane
+    (``follow.driven_lanes``). With ``follow_reassign`` the parts of a direction whose axis
+    bends are then re-assigned to its lanes along the bent axis (:func:`_reassign`, updates
+    ``lane_pts`` and the trajectories). The shift is not refitted: the parts that move lay
+    a lane width from the lane they had, beyond ``follow_gate``, and did not shape it
+    (refitted: SUMO dev 100-129 / 130-159 lanes 27.7 / 29.0 cm instead of 27.9 / 28.9)."""
     if not cfg.follow_lanes or not lane_pts:
-        return {}
-    out = {}
+        return {}, {}
+    out, driven = {}, {}
     for d, ext in exts.items():
         n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
+        lats = [f.lat[(d, k)] for k in range(n_lanes)]
         parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
-        if any(parts):
-            out[d] = arm_shift(f, [f.lat[(d, k)] for k in range(n_lanes)], parts, stop,
-                               stop + ext, cfg)
-    return out
+        if not any(parts):
+            continue
+        driven[d] = driven_lanes(parts, f, stop, stop + ext, cfg)
+        out[d] = arm_shift(f, lats, driven[d], stop, stop + ext, cfg)
+        if cfg.follow_reassign and n_lanes > 1 and out[d] is not None and \
+                _reassign(trajs, f, out[d], ai, d, lats, stop, stop + ext, lane_pts, cfg):
+            parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
+            driven[d] = driven_lanes(parts, f, stop, stop + ext, cfg)
+    return out, driven
 
 
-def _arm_borders(f, d, b, stop, ext, n_st, lane_pts, ai, n_lanes, cfg, shifts):
+def _reassign(trajs, f, g, ai, d, lats, lo, hi, lane_pts, cfg) -> bool:
+    """Re-assign the parts of arm ``ai``, direction ``d`` to its lanes by their offset from
+    the shifted axis (``follow.nearest_lanes``); True when any part moved."""
+    mine = [tr for tr in trajs
+            if (tr.lane_in if d == ENTERING else tr.lane_out) is not None
+            and (tr.lane_in if d == ENTERING else tr.lane_out)[0] == ai]
+    if not mine:
+        return False
+    new = nearest_lanes(f, g, lats, [_part_points(tr, d) for tr in mine], lo, hi, cfg)
+    moved = False
+    for tr, k in zip(mine, new):
+        old = tr.lane_in if d == ENTERING else tr.lane_out
+        if k < 0 or k == old[1]:
+            continue
+        moved = True
+        if d == ENTERING:
+            tr.lane_in = (ai, int(k))
+        else:
+            tr.lane_out = (ai, int(k))
+    if moved:
+        for k in range(len(lats)):
+            lane_pts.pop((ai, d, k), None)
+        for tr in mine:
+            lane = tr.lane_in if d == ENTERING else tr.lane_out
+            lane_pts.setdefault((ai, d, lane[1]), []).append(_part_points(tr, d))
+    return moved
+
+
+def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
     """(K + 1, n_st, 2) border polylines from the stop line outwards: straight (paper
-    §III-A) or, with ``follow_lanes``, shaped by the lanes' traffic (``lanes/follow.py``)."""
-    if cfg.follow_lanes and lane_pts:
-        parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
+    §III-A) or, with ``follow_lanes``, shaped by the lanes' traffic (``lanes/follow.py``;
+    ``shifts`` / ``driven`` of :func:`_follow_shifts`)."""
+    if cfg.follow_lanes and d in driven:
         shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
-                                stop + ext, n_st, parts, cfg, shifts.get(d))
+                                stop + ext, n_st, driven[d], cfg, shifts.get(d))
         if shaped is not None:
             return shaped
     s = np.linspace(stop, stop + ext, n_st)
@@ -394,7 +433,7 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
         f = frames[ai]
         exts = {d: _extent(far, ai, d, stops[ai], cfg, length) for d in (ENTERING, LEAVING)
                 if (a.lanes_in if d == ENTERING else a.lanes_out) > 0}
-        shifts = _follow_shifts(f, a, ai, stops[ai], exts, lane_pts, cfg)
+        shifts, driven = _follow_shifts(f, a, ai, stops[ai], exts, lane_pts, cfg, trajs)
         for d in (ENTERING, LEAVING):
             n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
             if n_lanes <= 0:
@@ -402,8 +441,7 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
             b = _border_positions([f.lat[(d, k)] for k in range(n_lanes)], f.width)
             ext = exts[d]
             n_st = max(2, int(round(ext / cfg.station_spacing)) + 1)
-            geo = _arm_borders(f, d, b, stops[ai], ext, n_st, lane_pts, ai, n_lanes, cfg,
-                               shifts)
+            geo = _arm_borders(f, d, b, stops[ai], ext, n_st, n_lanes, cfg, shifts, driven)
             if d == ENTERING:
                 geo = geo[:, ::-1]
             end = 0 if d == LEAVING else n_st - 1
