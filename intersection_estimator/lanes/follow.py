@@ -36,10 +36,13 @@ Per arm and driving direction (the straight frame ``origin + s u + lat n`` of
    offset along its unit normal ``N`` by their lateral positions, so the lanes keep their
    widths across the bend and stay parallel: a lane without traffic moves with its
    traffic-carrying neighbours;
-5. (``follow_per_lane``, on) each lane with traffic also gets its own deviation ``e_k``
-   from the reference curve (same fit and selection, on its points' signed offsets from
-   ``R``; not selected: none); a lane without traffic copies the deviation of its
-   nearest traffic-carrying neighbour; a border between two lanes takes the mean of theirs;
+5. (``follow_per_lane``; default 2: entering lanes only) each lane with traffic also gets
+   its own deviation ``e_k`` from the reference curve (same fit and selection, on its
+   points' signed offsets from ``R``; not selected: none); a lane without traffic copies
+   the deviation of its nearest traffic-carrying neighbour; a border between two lanes
+   takes the mean of theirs. Leaving lanes keep the common shift: their traffic is still
+   settling out of its turn, and on the real AV2 clips their deviations (one lane's few
+   vehicles over part of the arm, continued along its end slope) cost 26 -> 31 cm;
 6. (``follow_reassign``, on) before 4-5, where the direction bends, its trajectory parts
    are re-assigned to its lanes by their offset from ``R`` (:func:`nearest_lanes`):
    §III-A's assignment by the offset from straight rays mixes neighbouring lanes' parts
@@ -334,10 +337,10 @@ def arm_shift(frame, lats, lanes, lo: float, hi: float, cfg) -> OffsetFit | None
 
 
 def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, lanes, cfg,
-                   g: OffsetFit | None):
+                   g: OffsetFit | None, per_lane: bool = True):
     """Border polylines ``(K + 1, n_st, 2)`` of the ``K`` lanes of one arm direction,
     ordered from ``s = lo`` (stop line) to ``hi`` [m], offset from the axis shifted by
-    ``g`` (:func:`arm_shift`) plus, with ``follow_per_lane``, each lane's deviation; None
+    ``g`` (:func:`arm_shift`) plus, with ``per_lane``, each lane's deviation; None
     when that leaves them straight (module docstring, steps 4-5).
 
     ``lats``: (K,) lateral positions of the lane center lines [m]; ``borders``: (K + 1,)
@@ -345,7 +348,7 @@ def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, lanes,
     lane its traffic (:func:`driven_lanes`; may be empty)."""
     lats = np.asarray(lats, float)
     dev = None
-    if cfg.follow_per_lane:
+    if per_lane:
         dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg)
     if g is None and dev is None:
         return None

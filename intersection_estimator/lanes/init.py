@@ -417,7 +417,9 @@ def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
     ``shifts`` / ``driven`` of :func:`_follow_shifts`)."""
     if cfg.follow_lanes and d in driven:
         shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
-                                stop + ext, n_st, driven[d], cfg, shifts.get(d))
+                                stop + ext, n_st, driven[d], cfg, shifts.get(d),
+                                per_lane=cfg.follow_per_lane == 1
+                                or (cfg.follow_per_lane == 2 and d == ENTERING))
         if shaped is not None:
             return shaped
     s = np.linspace(stop, stop + ext, n_st)
