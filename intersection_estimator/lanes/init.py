@@ -362,9 +362,10 @@ def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=()) -> tuple[dict,
     (``lanes/follow.py``; None: straight), and direction -> that traffic per lane
     (``follow.driven_lanes``). With ``follow_reassign`` the parts of a direction whose axis
     bends are then re-assigned to its lanes along the bent axis (:func:`_reassign`, updates
-    ``lane_pts`` and the trajectories). The shift is not refitted: the parts that move lay
-    a lane width from the lane they had, beyond ``follow_gate``, and did not shape it
-    (refitted: SUMO dev 100-129 / 130-159 lanes 27.7 / 29.0 cm instead of 27.9 / 28.9)."""
+    ``lane_pts`` and the trajectories). The shift is not refitted: the parts that move lie
+    about a lane width from the lane they had, mostly beyond ``follow_gate``, and barely
+    shaped it (refitted: SUMO dev 100-129 / 130-159 lanes 27.7 / 29.0 cm instead of 27.9 /
+    28.9)."""
     if not cfg.follow_lanes or not lane_pts:
         return {}, {}
     out, driven = {}, {}
@@ -386,29 +387,29 @@ def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=()) -> tuple[dict,
 def _reassign(trajs, f, g, ai, d, lats, lo, hi, lane_pts, cfg) -> bool:
     """Re-assign the parts of arm ``ai``, direction ``d`` to its lanes by their offset from
     the shifted axis (``follow.nearest_lanes``); True when any part moved."""
-    mine = [tr for tr in trajs
-            if (tr.lane_in if d == ENTERING else tr.lane_out) is not None
-            and (tr.lane_in if d == ENTERING else tr.lane_out)[0] == ai]
+    mine = [tr for tr in trajs if _lane_of(tr, d) is not None and _lane_of(tr, d)[0] == ai]
     if not mine:
         return False
     new = nearest_lanes(f, g, lats, [_part_points(tr, d) for tr in mine], lo, hi, cfg)
     moved = False
     for tr, k in zip(mine, new):
-        old = tr.lane_in if d == ENTERING else tr.lane_out
-        if k < 0 or k == old[1]:
-            continue
-        moved = True
-        if d == ENTERING:
-            tr.lane_in = (ai, int(k))
-        else:
-            tr.lane_out = (ai, int(k))
+        if 0 <= k != _lane_of(tr, d)[1]:
+            moved = True
+            if d == ENTERING:
+                tr.lane_in = (ai, int(k))
+            else:
+                tr.lane_out = (ai, int(k))
     if moved:
         for k in range(len(lats)):
             lane_pts.pop((ai, d, k), None)
         for tr in mine:
-            lane = tr.lane_in if d == ENTERING else tr.lane_out
-            lane_pts.setdefault((ai, d, lane[1]), []).append(_part_points(tr, d))
+            lane_pts.setdefault((ai, d, _lane_of(tr, d)[1]), []).append(_part_points(tr, d))
     return moved
+
+
+def _lane_of(tr: Trajectory, d: int) -> tuple | None:
+    """(arm, k) of the trajectory's part in direction ``d``."""
+    return tr.lane_in if d == ENTERING else tr.lane_out
 
 
 def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
