@@ -237,3 +237,18 @@ def test_foot_points_on_the_shifted_axis_match_a_dense_search(curv, tilt, seed):
     s_got, off_got = _signed_offsets(P, frame, g, 5.0, 95.0)
     assert np.allclose(np.abs(off_got), orthogonal_distances(P, R), atol=1e-3)
     assert np.allclose(off_got, off, atol=1e-3) and np.allclose(s_got, ss, atol=0.05)
+
+
+def test_constant_offset_of_a_lane_beside_the_axis():
+    """``select_constant``: a lane's traffic 0.6 m beside the reference curve over part of
+    the lane gives a constant 0.6 m everywhere (no slope to continue beyond its points);
+    traffic centred on it, or too few points, gives none."""
+    from intersection_estimator.lanes.follow import select_constant
+    rng = np.random.default_rng(7)
+    w = np.full(200, 1.0)
+    fit = select_constant(0.6 + rng.normal(0, 0.2, 200), w, ON)
+    assert fit is not None
+    got = fit(np.array([0.0, 50.0, 500.0]))
+    assert np.allclose(got, got[0]) and abs(got[0] - 0.6) < 0.05
+    assert select_constant(rng.normal(0, 0.2, 200), w, ON) is None
+    assert select_constant(np.full(5, 0.6), np.ones(5), ON) is None

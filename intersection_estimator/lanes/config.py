@@ -49,8 +49,9 @@ _RANGES = {
     'follow_max_weight': ('[0.01, 100.0]', 'a point weighs the metres driven around it, at most this [m]'),
     'follow_corr_length': ('[0.01, 1000.0]', 'metres of one vehicle\'s path that count as one '
                            'observation in the selection [m]'),
-    'follow_per_lane': ('[0, 2]', 'each lane with traffic also gets its own deviation: 1 entering '
-                        'and leaving lanes, 2 entering lanes only, 0 none'),
+    'follow_per_lane': ('[0, 3]', 'each lane with traffic also gets its own deviation: 1 entering '
+                        'and leaving lanes, 2 entering lanes only, 3 entering lanes and a '
+                        'constant offset per leaving lane, 0 none'),
     'follow_reassign': ('[0, 1]', '1: the parts of a bent direction are re-assigned to its lanes '
                         'by their offset from the shifted axis'),
     'stop_fit': ('[0, 1]', '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
@@ -140,7 +141,7 @@ class LaneConfig:
     follow_stop_margin: float = 0.0
     follow_max_weight: float = 3.0
     follow_corr_length: float = 4.0
-    follow_per_lane: int = 2
+    follow_per_lane: int = 3
     follow_reassign: int = 1
     stop_fit: int = 1
     stop_search: float = 2.0

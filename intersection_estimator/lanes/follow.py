@@ -36,13 +36,14 @@ Per arm and driving direction (the straight frame ``origin + s u + lat n`` of
    offset along its unit normal ``N`` by their lateral positions, so the lanes keep their
    widths across the bend and stay parallel: a lane without traffic moves with its
    traffic-carrying neighbours;
-5. (``follow_per_lane``; default 2: entering lanes only) each lane with traffic also gets
-   its own deviation ``e_k`` from the reference curve (same fit and selection, on its
-   points' signed offsets from ``R``; not selected: none); a lane without traffic copies
-   the deviation of its nearest traffic-carrying neighbour; a border between two lanes
-   takes the mean of theirs. Leaving lanes keep the common shift: their traffic is still
-   settling out of its turn, and on the real AV2 clips their deviations (one lane's few
-   vehicles over part of the arm, continued along its end slope) cost 26 -> 31 cm;
+5. (``follow_per_lane``; default 3) each entering lane with traffic also gets its own
+   deviation ``e_k`` from the reference curve (same fit and selection, on its points'
+   signed offsets from ``R``; not selected: none), each leaving lane a constant one
+   (:func:`select_constant`); a lane without traffic copies the deviation of its nearest
+   traffic-carrying neighbour; a border between two lanes takes the mean of theirs.
+   Leaving lanes get no shape of their own: their traffic is still settling out of its
+   turn, and on the real AV2 clips such deviations (one lane's few vehicles over part of
+   the arm, continued along its end slope) cost 26 -> 31 cm;
 6. (``follow_reassign``, on) before 4-5, where the direction bends, its trajectory parts
    are re-assigned to its lanes by their offset from ``R`` (:func:`nearest_lanes`):
    §III-A's assignment by the offset from straight rays mixes neighbouring lanes' parts
@@ -67,8 +68,8 @@ from .spline import _data, aic_prefers, moving_average, second_differences
 #: Gauss-Newton steps of the foot point on the shifted axis (:func:`_signed_offsets`)
 FOOT_STEPS = 2
 
-__all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'nearest_lanes', 'driven_lanes',
-           'arm_shift', 'follow_borders']
+__all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'select_constant', 'nearest_lanes',
+           'driven_lanes', 'arm_shift', 'follow_borders']
 
 
 class OffsetFit:
@@ -272,11 +273,25 @@ def _straight(s) -> np.ndarray:
     return np.zeros(len(np.atleast_1d(s)))
 
 
-def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg):
+def select_constant(r: np.ndarray, w: np.ndarray, cfg):
+    """A constant offset [m] of a lane from the reference curve: the weighted (metres
+    driven) mean of its gated residuals ``r``, kept when it beats none by the selection of
+    :func:`_selected` with one degree of freedom; None otherwise."""
+    keep = np.abs(r) <= cfg.follow_gate
+    if keep.sum() < cfg.follow_min_points or w[keep].sum() <= 0:
+        return None
+    c = float(np.sum(w[keep] * r[keep]) / w[keep].sum())
+    if not _selected(r[keep], r[keep] - c, w[keep], 1.0, cfg):
+        return None
+    return lambda s: np.full(len(np.atleast_1d(s)), c)
+
+
+def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg, constant: bool = False):
     """(K, n) deviations ``e_k(s)`` [m] of each lane from the reference curve at axis
-    distances ``s``: with ``follow_min_points`` points its own selected fit, or none when
-    the fit is not selected (its traffic follows ``R``); with fewer its nearest such
-    neighbour's, else 0 (module docstring, step 5). Returns a function of ``s``."""
+    distances ``s``: with ``follow_min_points`` points its own selected fit (``constant``:
+    a constant, :func:`select_constant`), or none when the fit is not selected (its
+    traffic follows ``R``); with fewer its nearest such neighbour's, else 0 (module
+    docstring, step 5). Returns a function of ``s``."""
     fits: list = [None] * len(lats)
     own = [k for k, (P, _) in enumerate(lanes) if len(P) >= cfg.follow_min_points]
     if own:                          # one foot-point search for all lanes' points
@@ -284,7 +299,8 @@ def _lane_deviations(frame, g, lats, lanes, lo, hi, cfg):
                                          g, lo, hi)
         cuts = np.cumsum([len(lanes[k][0]) for k in own])[:-1]
         for k, sk, ok in zip(own, np.split(s_all, cuts), np.split(off_all, cuts)):
-            fit = select_offset(sk, ok - lats[k], lo, hi, cfg, lanes[k][1])
+            fit = select_constant(ok - lats[k], lanes[k][1], cfg) if constant else \
+                select_offset(sk, ok - lats[k], lo, hi, cfg, lanes[k][1])
             fits[k] = _straight if fit is None else fit
     have = [k for k, f in enumerate(fits) if f is not None]
 
@@ -337,19 +353,20 @@ def arm_shift(frame, lats, lanes, lo: float, hi: float, cfg) -> OffsetFit | None
 
 
 def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, lanes, cfg,
-                   g: OffsetFit | None, per_lane: bool = True):
+                   g: OffsetFit | None, per_lane: bool = True, constant: bool = False):
     """Border polylines ``(K + 1, n_st, 2)`` of the ``K`` lanes of one arm direction,
     ordered from ``s = lo`` (stop line) to ``hi`` [m], offset from the axis shifted by
-    ``g`` (:func:`arm_shift`) plus, with ``per_lane``, each lane's deviation; None
-    when that leaves them straight (module docstring, steps 4-5).
+    ``g`` (:func:`arm_shift`) plus, with ``per_lane``, each lane's deviation (with
+    ``constant``, its constant offset); None when that leaves them straight (module
+    docstring, steps 4-5).
 
     ``lats``: (K,) lateral positions of the lane center lines [m]; ``borders``: (K + 1,)
     lateral positions of their borders [m] (``init._border_positions``); ``lanes``: per
     lane its traffic (:func:`driven_lanes`; may be empty)."""
     lats = np.asarray(lats, float)
     dev = None
-    if per_lane:
-        dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg)
+    if per_lane or constant:
+        dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg, constant=not per_lane)
     if g is None and dev is None:
         return None
     C, N, s = _reference(frame, g, lo, hi, n_st)

@@ -420,7 +420,8 @@ def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
         shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
                                 stop + ext, n_st, driven[d], cfg, shifts.get(d),
                                 per_lane=cfg.follow_per_lane == 1
-                                or (cfg.follow_per_lane == 2 and d == ENTERING))
+                                or (cfg.follow_per_lane in (2, 3) and d == ENTERING),
+                                constant=cfg.follow_per_lane == 3 and d == LEAVING)
         if shaped is not None:
             return shaped
     s = np.linspace(stop, stop + ext, n_st)
