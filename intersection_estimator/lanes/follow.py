@@ -78,21 +78,23 @@ class OffsetFit:
 
     def __init__(self, spline: BSpline, edf: float, lo: float, hi: float):
         self.spline, self.edf, self.lo, self.hi = spline, edf, lo, hi
-        self._d = None            # the derivative, built on first use (most fits are not)
+        self._d = None            # the derivative and its end slopes, built on first use
+        self._ends = None         # (most fits are evaluated inside their range only)
 
     def _deriv(self) -> BSpline:
         if self._d is None:
             self._d = self.spline.derivative()
+            self._ends = (float(self._d(self.lo)), float(self._d(self.hi)))
         return self._d
 
     def __call__(self, s) -> np.ndarray:
         s = np.asarray(s, float)
         out = self.spline(np.clip(s, self.lo, self.hi))
-        below, above = s < self.lo, s > self.hi
-        if below.any() or above.any():
-            d = self._deriv()
-            out = (out + np.minimum(s - self.lo, 0.0) * float(d(self.lo))
-                   + np.maximum(s - self.hi, 0.0) * float(d(self.hi)))
+        if (s < self.lo).any() or (s > self.hi).any():
+            self._deriv()
+            d_lo, d_hi = self._ends
+            out = (out + np.minimum(s - self.lo, 0.0) * d_lo
+                   + np.maximum(s - self.hi, 0.0) * d_hi)
         return out
 
     def plus(self, other: 'OffsetFit') -> 'OffsetFit':
@@ -353,11 +355,11 @@ def arm_shift(frame, lats, lanes, lo: float, hi: float, cfg) -> OffsetFit | None
 
 
 def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, lanes, cfg,
-                   g: OffsetFit | None, per_lane: bool = True, constant: bool = False):
+                   g: OffsetFit | None, deviation: str | None = 'shape'):
     """Border polylines ``(K + 1, n_st, 2)`` of the ``K`` lanes of one arm direction,
     ordered from ``s = lo`` (stop line) to ``hi`` [m], offset from the axis shifted by
-    ``g`` (:func:`arm_shift`) plus, with ``per_lane``, each lane's deviation (with
-    ``constant``, its constant offset); None when that leaves them straight (module
+    ``g`` (:func:`arm_shift`) plus each lane's ``deviation``: 'shape' its own deviation,
+    'constant' its constant offset, None none; None when that leaves them straight (module
     docstring, steps 4-5).
 
     ``lats``: (K,) lateral positions of the lane center lines [m]; ``borders``: (K + 1,)
@@ -365,8 +367,9 @@ def follow_borders(frame, lats, borders, lo: float, hi: float, n_st: int, lanes,
     lane its traffic (:func:`driven_lanes`; may be empty)."""
     lats = np.asarray(lats, float)
     dev = None
-    if per_lane or constant:
-        dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg, constant=not per_lane)
+    if deviation is not None:
+        dev = _lane_deviations(frame, g, lats, lanes, lo, hi, cfg,
+                               constant=deviation == 'constant')
     if g is None and dev is None:
         return None
     C, N, s = _reference(frame, g, lo, hi, n_st)

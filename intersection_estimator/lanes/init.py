@@ -402,14 +402,23 @@ def _reassign(trajs, f, g, ai, d, lats, lo, hi, lane_pts, cfg) -> bool:
     if moved:
         for k in range(len(lats)):
             lane_pts.pop((ai, d, k), None)
-        for tr in mine:
-            lane_pts.setdefault((ai, d, _lane_of(tr, d)[1]), []).append(_part_points(tr, d))
+        lane_pts.update({key: parts for key, parts in _lane_points(mine).items()
+                         if key[:2] == (ai, d)})
     return moved
 
 
 def _lane_of(tr: Trajectory, d: int) -> tuple | None:
     """(arm, k) of the trajectory's part in direction ``d``."""
     return tr.lane_in if d == ENTERING else tr.lane_out
+
+
+def _lane_deviation(mode: int, d: int) -> str | None:
+    """What each lane of direction ``d`` gets beside the common shift under
+    ``LaneConfig.follow_per_lane`` ``mode``: 'shape' (its own deviation), 'constant' (a
+    constant offset) or None."""
+    if mode == 1 or (mode in (2, 3) and d == ENTERING):
+        return 'shape'
+    return 'constant' if mode == 3 and d == LEAVING else None
 
 
 def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
@@ -419,9 +428,7 @@ def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
     if cfg.follow_lanes and d in driven:
         shaped = follow_borders(f, [f.lat[(d, k)] for k in range(n_lanes)], b, stop,
                                 stop + ext, n_st, driven[d], cfg, shifts.get(d),
-                                per_lane=cfg.follow_per_lane == 1
-                                or (cfg.follow_per_lane in (2, 3) and d == ENTERING),
-                                constant=cfg.follow_per_lane == 3 and d == LEAVING)
+                                _lane_deviation(cfg.follow_per_lane, d))
         if shaped is not None:
             return shaped
     s = np.linspace(stop, stop + ext, n_st)
