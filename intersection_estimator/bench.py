@@ -37,6 +37,7 @@ import traceback
 from .estimate_io import dumps, estimate_to_dict
 from .evaluate import aggregate, evaluate
 from .sim import MODES, SimConfig, simulate_scenario
+from .tracking import TrackerConfig
 
 __all__ = ['BenchOptions', 'run_bench', 'run_case', 'format_table', 'PAPER', 'register',
            'merge_results', 'make_case', 'FAMILIES',
@@ -69,6 +70,7 @@ class BenchOptions:
     cost_model: bool = False   # per case: the sampler's work vs its limit (topology.cost_model)
     family: str = 'table1'
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
+    radar_tracking: bool = True   # raw: radar rows through the tracker (False: the paper's model)
 
 
 FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')
@@ -126,8 +128,9 @@ def _run_estimator(estimator, sc, opts: BenchOptions):
     """-> (estimate.json dict, timing_ms, profile) of the estimator on the scenario's detections."""
     dets = sc.detections(opts.mode)
     t0 = time.perf_counter()
+    extra = {} if opts.radar_tracking else {'tracker_config': TrackerConfig(enabled=False)}
     res = estimator(dets, mode=opts.mode, topology_samples=opts.samples,
-                    lane_samples=opts.lane_samples, seed=sc.seed)
+                    lane_samples=opts.lane_samples, seed=sc.seed, **extra)
     wall = 1e3 * (time.perf_counter() - t0)
     timing = {k: float(v) for k, v in dict(getattr(res, 'timing_ms', None) or {}).items()}
     timing.setdefault('total', wall)
@@ -151,7 +154,8 @@ def _warm_up(estimator, opts: BenchOptions) -> None:
     if opts.warmup and key not in _WARM:
         _WARM.add(key)
         small = BenchOptions(mode=opts.mode, samples=min(opts.samples, 200),
-                             lane_samples=min(opts.lane_samples, 200))
+                             lane_samples=min(opts.lane_samples, 200),
+                             radar_tracking=opts.radar_tracking)
         try:
             _run_estimator(estimator, simulate_scenario(opts.seed, SimConfig()), small)
         except Exception:  # noqa: BLE001 - the real case will report it
@@ -364,7 +368,9 @@ def format_table(result: dict) -> str:
          f"{_fmt(s.get('road_no_intersection_rate'), 'pct')} of {s.get('road_cases', 0)}", ''),
         ('failed cases', f"{s['n_failed']} / {s['n']}", ''),
     ]
-    head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}  n={cfg['n']}  "
+    radar = ('' if cfg['mode'] != 'raw' else
+             '  radar_tracking=' + ('on' if cfg.get('radar_tracking', True) else 'off (paper model)'))
+    head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}{radar}  n={cfg['n']}  "
             f"seed={cfg['seed']}  jobs={cfg['jobs']}  "
             f"estimator={cfg['estimator']}")
     w0 = max(len(r[0]) for r in rows)
@@ -427,7 +433,7 @@ def _cmd(args) -> int:
                         oracle=args.oracle, warmup=not args.no_warmup,
                         profile=getattr(args, 'profile', False) or getattr(args, 'cost_model', False),
                         cost_model=getattr(args, 'cost_model', False), family=args.family,
-                        empty_lanes=args.empty_lanes)
+                        empty_lanes=args.empty_lanes, radar_tracking=not args.no_radar_tracking)
     if not opts.oracle:
         try:
             _load_estimator()
@@ -489,6 +495,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--merge', nargs='+', metavar='JSON',
                    help='merge bench JSON files of one family / mode (chunks of seeds) '
                    'and print their pooled table (no cases run)')
+    p.add_argument('--no-radar-tracking', action='store_true',
+                   help="--mode raw: the paper's raw-detection model (radar rows voxelised), "
+                   'not the radar tracker (intersection_estimator.tracking)')
     p.add_argument('--no-warmup', action='store_true',
                    help='time the first case cold (imports / JIT compilation included)')
     p.set_defaults(func=_cmd)

@@ -75,6 +75,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('lane_period', 1.0, 'lane course re-estimated at most this often (at once on a new '
               'topology) [s]', 0.0, 60.0),
     ParamSpec('lanes_enabled', True, 'estimate the lane course (needs tracked objects)'),
+    ParamSpec('radar_tracking', True, 'radar rows go through the radar tracker and enter the window as '
+              'tracks (the lane course then runs on radar alone); false = the paper\'s raw-detection '
+              'model (radar rows voxelised, straight lanelets)'),
     ParamSpec('reset_distance', 25.0, 'ego past the center by this -> start on the next intersection [m]',
               1.0, 1000.0),
     ParamSpec('seed', 0, 'seed of every random draw', 0, 2**31 - 1),
@@ -177,6 +180,7 @@ def pipeline_config(values: dict):
     from .pipeline import PipelineConfig
     from .lanes import LaneConfig
     from .topology import TopologyConfig
+    from .tracking import TrackerConfig
     weak = tuple(int(v) for v in values['weak_labels'])
     cfg = replace(PipelineConfig(), window_s=float(values['window_s']),
                   max_observations=int(values['max_observations']),
@@ -186,6 +190,7 @@ def pipeline_config(values: dict):
                   lanes_enabled=bool(values['lanes_enabled']), lane_period=float(values['lane_period']),
                   reset_distance=float(values['reset_distance']),
                   topology=replace(TopologyConfig(), weak_labels=weak),
-                  lanes=replace(LaneConfig(), skip_labels=weak))
+                  lanes=replace(LaneConfig(), skip_labels=weak),
+                  radar_tracking=replace(TrackerConfig(), enabled=bool(values['radar_tracking'])))
     cfg.validate()
     return cfg

@@ -22,6 +22,8 @@ from .observability import Observability, assess
 from .observations import Detections
 from .ranges import check_table
 from .topology import TopologyConfig, TopologyEstimator
+from .topology.preprocess import radar_filter
+from .tracking import RADAR_TRACK_ID0, RadarTracker, TrackerConfig, radar_rows_of, track_radar
 
 __all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'mode_of', 'needs_sampling',
            'IDLE_SAMPLING_TICKS']
@@ -80,18 +82,25 @@ def _seeds(seed) -> tuple[np.random.Generator, np.random.Generator]:
 def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int = 5000,
              lane_samples: int = 20000, seed: int = 0,
              topology_config: TopologyConfig | None = None,
-             lane_config: LaneConfig | None = None) -> EstimateResult:
+             lane_config: LaneConfig | None = None,
+             tracker_config: TrackerConfig | None = None) -> EstimateResult:
     """Estimate topology and lane course from one batch of detections (bench entry point).
 
-    ``mode`` 'raw' ignores track ids (paper §II raw-detection experiment); lane course
-    needs trajectories and is skipped (straight lanelets from the topology instead).
+    ``mode`` 'raw' ignores track ids (paper §II raw-detection experiment); its radar rows
+    go through the radar tracker (:mod:`.tracking`, ``tracker_config.enabled``) and the
+    tracks through the tracked pipeline; with the tracker off, or when it reports no
+    track, the paper's raw model runs and the lane course is skipped (straight lanelets
+    from the topology instead).
     """
     mode = mode or mode_of(dets)
     if mode not in ('tracked', 'raw', 'heading'):
         raise ValueError(f"mode must be 'tracked', 'raw' or 'heading', got {mode!r}")
-    dets = in_mode(dets, mode)
+    topology_config = topology_config or TopologyConfig()
+    tt = time.perf_counter()
+    dets, mode = radar_tracked(in_mode(dets, mode), mode, tracker_config or TrackerConfig(),
+                               topology_config)
     rng_topo, rng_lanes = _seeds(seed)
-    topo = TopologyEstimator(topology_config or TopologyConfig(), rng_topo)
+    topo = TopologyEstimator(topology_config, rng_topo)
     t0 = time.perf_counter()
     topo.set_observations(dets)
     ta = time.perf_counter()
@@ -102,7 +111,8 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
     tb = time.perf_counter()
     lanelets, n_lane, lane_s = _lanes(best, dets, mode, lane_samples, lane_config, rng_lanes)
     t2 = time.perf_counter()
-    timing = {'topology': (tb - t0) * 1e3, 'lanes': (t2 - tb) * 1e3, 'total': (t2 - t0) * 1e3}
+    timing = {'topology': (tb - t0) * 1e3, 'lanes': (t2 - tb) * 1e3, 'total': (t2 - tt) * 1e3,
+              'tracking': (t0 - tt) * 1e3}
     state = topo.state
     return EstimateResult(best, lanelets, timing, topo.samples_drawn, n_lane,
                           topo.best_log_posterior, state, len(dets), sampler_state=state,
@@ -110,6 +120,20 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
                           counters={'topology_preprocess': int(topo.preprocess_count),
                                     'topology_chains': int(topo.n_chains)},
                           observability=observability)
+
+
+def radar_tracked(dets: Detections, mode: str, cfg: TrackerConfig,
+                  topology: TopologyConfig) -> tuple[Detections, str]:
+    """(detections, mode) the estimators read: in 'raw' mode with the tracker on, the radar
+    rows that pass the clutter filter (:func:`.preprocess.radar_filter`) become radar tracks
+    and the window is 'tracked' (the other rows stay as they are); else unchanged."""
+    if mode != 'raw' or not cfg.enabled:
+        return dets, mode
+    radar = radar_rows_of(dets)
+    tracks = track_radar(dets, cfg, radar_filter(dets, topology.preprocess_config(), moving_only=False))
+    if not len(tracks):
+        return dets, mode
+    return Detections.concat([tracks, dets.subset(~radar)]), 'tracked'
 
 
 def in_mode(dets: Detections, mode: str) -> Detections:
@@ -198,6 +222,7 @@ class PipelineConfig:
     topology: TopologyConfig = field(default_factory=TopologyConfig)
     lanes: LaneConfig = field(default_factory=LaneConfig)
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)  # reported state
+    radar_tracking: TrackerConfig = field(default_factory=TrackerConfig)      # radar rows -> tracks
 
     def validate(self) -> None:
         """Raise ValueError naming the first parameter outside its allowed range."""
@@ -205,6 +230,7 @@ class PipelineConfig:
         self.topology.validate()
         self.lanes.validate()
         self.convergence.validate()
+        self.radar_tracking.validate()
 
 
 class OnlineEstimator:
@@ -220,6 +246,9 @@ class OnlineEstimator:
         self._resets = 0
         self._lock = threading.Lock()   # add() may run in another thread than tick()
         self.evicted = 0                # observations the max_observations cap pushed out, ever
+        # radar rows -> tracks as they arrive; kept over resets (the vehicles drive on)
+        self._tracker = RadarTracker(self.config.radar_tracking) if self.config.radar_tracking.enabled else None
+        self._clutter_cfg = self.config.topology.preprocess_config()
         self.reset()
 
     def reset(self) -> None:
@@ -262,9 +291,10 @@ class OnlineEstimator:
         return self._resets
 
     def window(self) -> Detections:
-        """The observations currently in the window."""
+        """The observations currently in the window, as the estimators read them
+        (:meth:`_estimated`)."""
         with self._lock:
-            return Detections.concat(self._parts)
+            return self._estimated(Detections.concat(self._parts))
 
     def add(self, dets: Detections) -> int:
         """Append finite detections to the window; returns how many finite ones came.
@@ -272,8 +302,13 @@ class OnlineEstimator:
         The window never holds more than ``max_observations``, not even between ticks: the
         oldest observations (in arrival order) give way to new ones, and a message larger
         than the cap keeps its newest rows. What gave way is counted in :attr:`evicted`.
+        With the radar tracker on, the rows it hands out for the radar rows join them
+        (:meth:`_radar_tracks`, :meth:`_estimated`); the count returned is of the rows that came.
         """
         dets = dets.finite()
+        came = len(dets)
+        if self._tracker is not None and came:
+            dets = Detections.concat([dets, self._radar_tracks(dets)])
         n = len(dets)
         if n:
             with self._lock:
@@ -283,7 +318,40 @@ class OnlineEstimator:
                 self._n += len(self._parts[-1])
                 self.evicted += n - len(self._parts[-1])
                 self._dirty = True
-        return n
+        return came
+
+    def _radar_tracks(self, dets: Detections) -> Detections:
+        """The rows the tracker hands out for the radar rows of ``dets`` (one scan per
+        stamp, in stamp order; rows the clutter filter drops are no scan's)."""
+        radar = radar_rows_of(dets)
+        if not radar.any():
+            return Detections.empty()
+        d = dets.subset(radar & radar_filter(dets, self._clutter_cfg, moving_only=False))
+        d = d.subset(np.argsort(d.t, kind='stable'))
+        ts, starts = np.unique(d.t, return_index=True)
+        out = []
+        with self._lock:
+            for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
+                out.append(self._tracker.step(float(t), d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b]))
+        return Detections.concat(out)
+
+    @staticmethod
+    def _estimated(dets: Detections) -> Detections:
+        """What the estimators read of the window: with tracked objects of its own the
+        radar tracks are left out (the radar rows count as in the paper, beside the
+        objects); without, and once the tracker reported a track, the radar tracks replace
+        the radar rows (as :func:`radar_tracked` does for a batch)."""
+        radar_track = dets.track_id >= RADAR_TRACK_ID0
+        if not radar_track.any():
+            return dets
+        if ((dets.track_id >= 0) & ~radar_track).any():
+            return dets.subset(~radar_track)
+        return dets.subset(~radar_rows_of(dets))
+
+    @property
+    def radar_scans_out_of_order(self) -> int:
+        """Radar scans older than the tracker's last, ignored (0 without the tracker)."""
+        return 0 if self._tracker is None else self._tracker.scans_out_of_order
 
     def _make_room(self, n: int) -> None:
         """Drop the oldest parts (the front one maybe in part, as a view: no copy) so that
@@ -359,7 +427,7 @@ class OnlineEstimator:
                 self.result = replace(self.result, timing_ms={'topology': 0.0, 'lanes': 0.0, 'total': 0.0},
                                       lanes_updated=False)
                 return self.result
-            dets = self._window(now) if dirty else Detections.concat(self._parts)
+            dets = self._estimated(self._window(now) if dirty else Detections.concat(self._parts))
         restart = False
         if dirty:
             self._topo.set_observations(dets)

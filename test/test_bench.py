@@ -9,6 +9,7 @@ import pytest
 
 from intersection_estimator import bench
 from intersection_estimator.bench import BenchOptions, format_table, is_perfect, run_bench
+from intersection_estimator.cli import main
 from intersection_estimator.evaluate import SUMMARY_KEYS
 from intersection_estimator.model import Lanelet
 from intersection_estimator.sim import SimConfig, simulate_scenario
@@ -135,3 +136,20 @@ def test_cost_model_lands_in_the_profile_and_its_table():
     assert 0 < c['must_entries_per_sample'] <= c['entries_per_sample']
     assert 0 < c['must_logs_per_sample'] <= c['logs_per_sample']
     assert 'x limit' in format_cost(pooled)
+
+
+def test_no_radar_tracking_hands_the_estimator_the_paper_model(monkeypatch):
+    """``--no-radar-tracking``: the estimator gets a disabled tracker config; by default it
+    gets none (its own default: the tracker); the table's header says which."""
+    seen = []
+
+    def est(dets, *, mode, topology_samples, lane_samples, seed, **kw):
+        seen.append(kw.get('tracker_config'))
+        return _shifted_gt_estimator([])(dets, mode=mode, topology_samples=topology_samples,
+                                         lane_samples=lane_samples, seed=seed)
+    off = run_bench(BenchOptions(n=1, mode='raw', seed=3, warmup=False, radar_tracking=False), estimator=est)
+    assert seen[-1] is not None and not seen[-1].enabled
+    assert 'radar_tracking=off' in format_table(off)
+    on = run_bench(BenchOptions(n=1, mode='raw', seed=3, warmup=False), estimator=est)
+    assert seen[-1] is None and 'radar_tracking=on' in format_table(on)
+    assert main(['bench', '--n', '1', '--oracle', '--mode', 'raw', '--no-radar-tracking']) == 0

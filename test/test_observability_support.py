@@ -10,6 +10,7 @@ import pytest
 from intersection_estimator.estimate_io import dumps, estimate_to_dict, parse_estimate
 from intersection_estimator.pipeline import estimate
 from intersection_estimator.sim import simulate_scenario
+from intersection_estimator.tracking import TrackerConfig
 
 
 @pytest.fixture(scope='module')
@@ -51,10 +52,20 @@ def test_support_round_trips_through_estimate_json(tracked):
 
 
 def test_raw_arms_get_the_passages_behind_their_confidence():
+    """The paper's raw model (radar tracker off): voxels, no passages per lane."""
     sc = simulate_scenario(5)
-    res = estimate(sc.detections('raw'), mode='raw', topology_samples=1500, seed=0)
+    res = estimate(sc.detections('raw'), mode='raw', topology_samples=1500, seed=0,
+                   tracker_config=TrackerConfig(enabled=False))
     for arm in res.intersection.arms:
         assert arm.support > 0
         assert 1 - math.exp(-arm.support / 3) == pytest.approx(arm.confidence, abs=1e-9)
     for ll in res.lanelets:
         assert ll.support == 0 and ll.confidence == res.intersection.arms[ll.arm].confidence
+
+
+def test_radar_tracks_give_the_lanes_their_passages():
+    """With the radar tracker (default) raw radar has trajectories: lanes count passages."""
+    sc = simulate_scenario(5)
+    res = estimate(sc.detections('raw'), mode='raw', topology_samples=1500, lane_samples=500, seed=0)
+    assert sum(ll.support for ll in res.lanelets) > 0
+    assert all(a.support > 0 for a in res.intersection.arms)

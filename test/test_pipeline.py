@@ -28,7 +28,7 @@ def test_estimate_is_deterministic_per_seed(scenario):
     b = estimate(dets, mode='tracked', topology_samples=1500, lane_samples=3000, seed=3)
     assert _json(a) == _json(b)
     assert a.topology_samples == 1500 * TopologyConfig().chains_tracked and a.lane_samples > 0
-    assert set(a.timing_ms) == {'topology', 'lanes', 'total'}
+    assert set(a.timing_ms) == {'tracking', 'topology', 'lanes', 'total'}
 
 
 def test_raw_mode_ignores_track_ids_and_skips_the_lane_mcmc(scenario):

@@ -169,6 +169,9 @@ RANGES = {
     'descent_add_support': ('[0, inf)', 'the descent also tries an arm where trajectory parts of '
                             'this many vehicle passages are explained by no arm (0: off; '
                             'topology/unexplained.py)'),
+    'radar_tracks_add_support': ('[0, inf)', 'descent_add_support for a window whose tracks all '
+                                 'come from the radar tracker (0: off; their breaks leave parts '
+                                 'no arm explains)'),
     # reported estimate
     'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
                              'overlapping by this many metres show side by side (0: off; '
@@ -313,6 +316,7 @@ class TopologyConfig:
     descent_focus: float = 0.8
     descent_top: int = 0
     descent_add_support: float = 1.5
+    radar_tracks_add_support: float = 0.0   # descent_add_support on radar-tracker windows
     # reported estimate
     side_by_side_overlap: float = 8.0
     side_by_side_cap: int = 2

@@ -19,6 +19,7 @@ estimate leaves out arms without support (:mod:`.support`).
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 import time
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from ..model import Intersection
 from ..observations import Detections
+from ..tracking.tracker import RADAR_TRACK_ID0
 from .config import Tables, TopologyConfig
 from .descent import descend
 from .init import initial_state
@@ -97,6 +99,8 @@ class TopologyEstimator:
         """Replace the observation window; keep the chains (warm start, re-heated)."""
         self._dets = dets.finite()
         self._tracked = self._dets.has_tracks
+        ids = self._dets.track_id[self._dets.track_id >= 0]
+        self._radar_tracks = bool(len(ids)) and bool((ids >= RADAR_TRACK_ID0).all())
         self._radar = None
         self._tracks = None
         self._since_data = 0
@@ -320,7 +324,7 @@ class TopologyEstimator:
         post = self._post
         post.work = self.work['descent']
         try:
-            res = descend(c.best_S, self.cfg, post, self._rng, deadline)
+            res = descend(c.best_S, self._descent_cfg, post, self._rng, deadline)
         finally:
             post.work = self.work['chain']
         if res.lpost > c.best_lpost:
@@ -330,6 +334,16 @@ class TopologyEstimator:
             c.ll, _ = self._post.loglik(c.S, c.C)
             c.lp = res.lpost - c.ll
         return res.samples
+
+    @property
+    def _descent_cfg(self) -> TopologyConfig:
+        """The descent's settings: a window whose tracks all come from the radar tracker
+        adds arms for unexplained parts from ``radar_tracks_add_support`` passages (a radar
+        track that breaks inside the box leaves parts no arm explains)."""
+        if getattr(self, '_radar_tracks', False) and \
+                self.cfg.radar_tracks_add_support != self.cfg.descent_add_support:
+            return replace(self.cfg, descent_add_support=self.cfg.radar_tracks_add_support)
+        return self.cfg
 
     def _track_convergence(self) -> None:
         """Note a gain of more than ``converge_tol``; re-preprocess when the best center

@@ -1,0 +1,60 @@
+"""Which radar rows a track takes, and which tracks follow one vehicle.
+
+A vehicle returns 1-4 radar rows per scan spread over its body, so a row is compared with
+a track's predicted position under the track's position covariance plus the spread of one
+row about the vehicle's center, oriented along the track's velocity (round while it stands).
+A row whose Doppler disagrees with the track's predicted radial speed is not its row
+(neighbouring vehicles of a queue and of the opposite lane differ there first).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import TrackerConfig
+
+__all__ = ['body_cov', 'gate_distance', 'duplicates']
+
+
+def body_cov(u: np.ndarray, cfg: TrackerConfig) -> np.ndarray:
+    """(n, 2, 2) covariance of one row about a vehicle heading along unit ``u`` (a zero
+    ``u``: a standing vehicle, heading unknown, round)."""
+    sl, sw = cfg.body_along_m, cfg.body_across_m
+    along = np.einsum('ni,nj->nij', u, u)
+    oriented = sl**2 * along + sw**2 * (np.eye(2)[None] - along)
+    round_ = 0.5 * (sl**2 + sw**2) * np.eye(2)[None]
+    return np.where((np.linalg.norm(u, axis=1) < 0.5)[:, None, None], round_, oriented)
+
+
+def _headings(X: np.ndarray) -> np.ndarray:
+    v = X[:, 2:]
+    sp = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(sp > 0.5, v / np.maximum(sp, 1e-9), 0.0)
+
+
+def gate_distance(X: np.ndarray, P: np.ndarray, xy: np.ndarray, cfg: TrackerConfig,
+                  doppler: np.ndarray | None = None, los: np.ndarray | None = None) -> np.ndarray:
+    """(tracks, rows) Mahalanobis distance of rows ``xy`` from the predicted tracks (states
+    ``X``, covariances ``P``) in gates (``gate_sigma``); inf where a row's ``doppler`` is
+    more than ``doppler_tol`` from the track's velocity along the row's line of sight ``los``."""
+    S = P[:, :2, :2] + body_cov(_headings(X), cfg)
+    dx = xy[None, :, :] - X[:, None, :2]
+    d = np.sqrt(np.einsum('tri,tij,trj->tr', dx, np.linalg.inv(S), dx)) / cfg.gate_sigma
+    if doppler is not None:
+        d[np.abs(X[:, 2:] @ los.T - doppler[None]) > cfg.doppler_tol] = np.inf
+    return d
+
+
+def duplicates(X: np.ndarray, P: np.ndarray, hits: np.ndarray, cfg: TrackerConfig) -> np.ndarray:
+    """Indices of tracks that follow a vehicle another track with more updates follows:
+    within ``merge_gates`` of it and velocities within ``merge_speed``."""
+    if len(X) < 2 or cfg.merge_gates <= 0:
+        return np.zeros(0, np.int64)
+    d = gate_distance(X, P, X[:, :2], cfg)
+    dv = np.linalg.norm(X[:, None, 2:] - X[None, :, 2:], axis=2)
+    np.fill_diagonal(d, np.inf)
+    gone: set[int] = set()
+    for i, j in zip(*np.nonzero((d <= cfg.merge_gates) & (dv <= cfg.merge_speed))):
+        if i not in gone and j not in gone:
+            gone.add(int(i) if hits[i] < hits[j] else int(j))
+    return np.array(sorted(gone), np.int64)

@@ -1,0 +1,216 @@
+"""A radar tracker: radar rows scan by scan -> tracks with position, heading and speed.
+
+Per scan (one stamp), rows that survive the radar clutter filter go to the track whose
+gate (:func:`.gating.gate_distance`) they are nearest, inside one gate; a track is updated
+with the mean of its rows (:func:`.kalman.update`, variance ``row_var`` / rows). Rows
+farther than ``spawn_gates`` from every track are clustered (single linkage within
+``cluster_m``) and each cluster starts a track whose velocity is its Doppler along the line
+of sight. Two tracks on one vehicle: the younger ends (:func:`.gating.duplicates`). A
+track ends after ``max_miss`` scans without rows and is reported once it has ``confirm``
+updates, ``min_rows`` rows, ``min_path_m`` between its first and last position and has
+moved (``min_speed``); while it stands its rows keep the heading it last drove.
+
+Online (:meth:`RadarTracker.step`) a track's rows are filtered states, handed out when
+the track is reported and then scan by scan; in a batch (:func:`track_radar`) every
+reported track is smoothed (:func:`.kalman.rts`) once all scans are in. Deterministic: no
+random draw.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from ..observations import Detections
+from .config import TrackerConfig
+from .gating import duplicates, gate_distance
+from .kalman import predict, rts, transition, update
+
+__all__ = ['RADAR_TRACK_ID0', 'RadarTracker', 'track_radar', 'radar_rows_of']
+
+#: track ids of radar tracks start here (apart from a tracked-objects topic's ids)
+RADAR_TRACK_ID0 = 1 << 40
+
+
+def radar_rows_of(dets: Detections) -> np.ndarray:
+    """Mask of radar rows: no identity, a finite Doppler."""
+    return (dets.track_id < 0) & np.isfinite(dets.doppler)
+
+
+class _Track:
+    """One track: filter state, counters, and its updates (t, predicted and filtered
+    state and covariance) since the last rows handed out."""
+
+    __slots__ = ('x', 'P', 'hits', 'miss', 'id', 'hist', 'start', 'moved', 'heading', 'reported')
+
+    def __init__(self, z, v, tid: int, t: float, cfg: TrackerConfig):
+        self.x = np.array([z[0], z[1], v[0], v[1]])
+        self.P = np.diag([0.36, 0.36, cfg.velocity_sigma0**2, cfg.velocity_sigma0**2])
+        self.hits, self.miss, self.id = 1, 0, tid
+        self.hist = [(t, self.x.copy(), self.P.copy(), self.x.copy(), self.P.copy())]
+        self.start = self.x[:2].copy()
+        self.moved = False
+        self.heading = math.nan
+        self.reported = False
+
+    def passes(self, n_rows: int, cfg: TrackerConfig) -> bool:
+        """Is the track reported (its rows handed out)?"""
+        return (self.hits >= cfg.confirm and n_rows >= cfg.min_rows and self.moved
+                and float(np.hypot(*(self.x[:2] - self.start))) >= cfg.min_path_m)
+
+
+class RadarTracker:
+    """Radar rows in, tracked rows out (module docstring). ``keep_history`` keeps every
+    update for :meth:`finish` (batch); online a track holds at most ``max_backlog`` updates
+    before it is reported and none after."""
+
+    def __init__(self, cfg: TrackerConfig | None = None, keep_history: bool = False):
+        self.cfg = (cfg or TrackerConfig()).validate()
+        self.keep_history = keep_history
+        self.live: list[_Track] = []
+        self.ended: list[_Track] = []
+        self.t: float | None = None
+        self._next_id = 0
+        self.scans_out_of_order = 0
+
+    def step(self, t: float, xy: np.ndarray, doppler: np.ndarray, sensor_xy: np.ndarray) -> Detections:
+        """One scan of filtered radar rows at stamp ``t``; returns the tracked rows handed
+        out now (online). A scan older than the last is counted and ignored."""
+        if self.t is not None and t < self.t:
+            self.scans_out_of_order += 1
+            return Detections.empty()
+        dt = 0.0 if self.t is None else t - self.t
+        self.t = t
+        cfg = self.cfg
+        F, Q = transition(dt, cfg.accel_noise)
+        for tr in self.live:
+            tr.x, tr.P = predict(tr.x, tr.P, F, Q)
+        los = xy - sensor_xy
+        los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
+        owner, near = self._associate(xy, doppler, los)
+        for i in np.unique(owner[owner >= 0]):
+            sel = owner == i
+            self._update(self.live[i], xy[sel].mean(0), int(sel.sum()), t)
+        self._end_duplicates()
+        for tr in self.live:
+            tr.miss += 1
+        self.ended += [tr for tr in self.live if tr.miss > cfg.max_miss]
+        self.live = [tr for tr in self.live if tr.miss <= cfg.max_miss]
+        self._spawn(np.flatnonzero((owner < 0) & ~near), xy, doppler, los, t)
+        if not self.keep_history:
+            self.ended = []
+            return self._hand_out()
+        return Detections.empty()
+
+    def finish(self) -> Detections:
+        """Batch: every reported track of the scans so far, smoothed."""
+        rows = []
+        for tr in self.ended + self.live:
+            if tr.passes(len(tr.hist), self.cfg):
+                rows.append(self._rows(tr, smooth=True))
+        return Detections.concat(rows)
+
+    # -- internals ----------------------------------------------------------------------
+    def _associate(self, xy, doppler, los):
+        """Owner track of every row (-1: none) and rows near a track (they start none)."""
+        n = len(xy)
+        if not self.live or n == 0:
+            return np.full(n, -1), np.zeros(n, bool)
+        X = np.array([tr.x for tr in self.live])
+        P = np.array([tr.P for tr in self.live])
+        d = gate_distance(X, P, xy, self.cfg, doppler, los)
+        best = np.argmin(d, axis=0)
+        dmin = d[best, np.arange(n)]
+        return np.where(dmin <= 1.0, best, -1), dmin <= self.cfg.spawn_gates
+
+    def _update(self, tr: _Track, z, k: int, t: float) -> None:
+        xp, Pp = tr.x.copy(), tr.P.copy()
+        tr.x, tr.P = update(tr.x, tr.P, z, self.cfg.row_var / k * np.eye(2))
+        tr.hits += 1
+        tr.miss = -1
+        tr.hist.append((t, xp, Pp, tr.x.copy(), tr.P.copy()))
+        if not self.keep_history and not tr.reported and len(tr.hist) > self.cfg.max_backlog:
+            del tr.hist[0]
+        if float(np.hypot(tr.x[2], tr.x[3])) >= self.cfg.min_speed:
+            tr.moved = True
+
+    def _end_duplicates(self) -> None:
+        if len(self.live) < 2:
+            return
+        X = np.array([tr.x for tr in self.live])
+        P = np.array([tr.P for tr in self.live])
+        gone = set(duplicates(X, P, np.array([tr.hits for tr in self.live]), self.cfg).tolist())
+        if gone:
+            self.ended += [tr for k, tr in enumerate(self.live) if k in gone]
+            self.live = [tr for k, tr in enumerate(self.live) if k not in gone]
+
+    def _spawn(self, free, xy, doppler, los, t: float) -> None:
+        if not len(free):
+            return
+        n = len(free)
+        pairs = cKDTree(xy[free]).query_pairs(self.cfg.cluster_m, output_type='ndarray')
+        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        k, lab = connected_components(g, directed=False)
+        for j in range(k):
+            rows = free[lab == j]
+            v = doppler[rows].mean() * los[rows].mean(0)
+            self.live.append(_Track(xy[rows].mean(0), v, self._next_id, t, self.cfg))
+            self._next_id += 1
+
+    def _hand_out(self) -> Detections:
+        """Online: rows of tracks reported by now (their backlog first)."""
+        out = []
+        for tr in self.live:
+            if tr.miss != 0:
+                continue                      # no update this scan: nothing new
+            if tr.reported or tr.passes(tr.hits, self.cfg):
+                tr.reported = True
+                out.append(self._rows(tr, smooth=False))
+                tr.hist = tr.hist[-1:]
+        return Detections.concat(out)
+
+    def _rows(self, tr: _Track, smooth: bool) -> Detections:
+        """The track's updates since it last handed out rows, as tracked rows (the first
+        update handed out before is skipped online: its row went out then)."""
+        skip = not smooth and tr.reported and len(tr.hist) > 1
+        t = np.array([h[0] for h in tr.hist])
+        xs = (rts(t, np.array([h[1] for h in tr.hist]), np.array([h[2] for h in tr.hist]),
+                  np.array([h[3] for h in tr.hist]), np.array([h[4] for h in tr.hist]),
+                  self.cfg.accel_noise) if smooth else np.array([h[3] for h in tr.hist]))
+        if skip:
+            t, xs = t[1:], xs[1:]
+        heading, speed = self._held_headings(tr, xs)
+        return Detections.make(xs[:, :2], t, heading=heading, speed=speed,
+                               track_id=RADAR_TRACK_ID0 + tr.id, label=0)
+
+    def _held_headings(self, tr: _Track, xs: np.ndarray):
+        """Heading of every row: its velocity's while it moves (``min_speed``), else the
+        last one driven (before the first: the first one driven)."""
+        sp = np.hypot(xs[:, 2], xs[:, 3])
+        h = np.arctan2(xs[:, 3], xs[:, 2])
+        moving = sp >= self.cfg.min_speed
+        idx = np.maximum.accumulate(np.where(moving, np.arange(len(xs)), -1))
+        if moving.any():
+            fill = tr.heading if math.isfinite(tr.heading) else h[np.flatnonzero(moving)[0]]
+            held = np.where(idx >= 0, h[np.maximum(idx, 0)], fill)
+            tr.heading = float(held[-1])
+        else:
+            held = np.full(len(xs), tr.heading)
+        return held, np.where(moving, sp, 0.0)
+
+
+def track_radar(dets: Detections, cfg: TrackerConfig | None = None, clutter=None) -> Detections:
+    """Batch: the radar rows of ``dets`` (those ``clutter`` keeps, a mask; default all)
+    scan by scan through a :class:`RadarTracker`, reported tracks smoothed."""
+    m = radar_rows_of(dets) if clutter is None else (clutter & radar_rows_of(dets))
+    d = dets.subset(m)
+    d = d.subset(np.argsort(d.t, kind='stable'))
+    tracker = RadarTracker(cfg, keep_history=True)
+    ts, starts = np.unique(d.t, return_index=True)
+    for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
+        tracker.step(float(t), d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b])
+    return tracker.finish()

@@ -1,0 +1,52 @@
+"""The constant-velocity model and its smoother (tracking/kalman.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from intersection_estimator.tracking.kalman import predict, rts, transition, update
+
+
+def test_transitions_compose():
+    Fa, _ = transition(0.3, 2.0)
+    Fb, _ = transition(0.5, 2.0)
+    Fab, _ = transition(0.8, 2.0)
+    assert np.allclose(Fa @ Fb, Fab)
+
+
+def test_process_noise_grows_with_time_and_is_symmetric_positive():
+    _, q1 = transition(0.1, 2.0)
+    _, q2 = transition(0.2, 2.0)
+    assert np.allclose(q1, q1.T) and np.all(np.linalg.eigvalsh(q1) > 0)
+    assert np.trace(q2) > np.trace(q1)
+
+
+def _filtered(rng, n=80, dt=0.1, v=(8.0, 2.0), sigma=1.0):
+    truth = np.array(v) * dt * np.arange(n)[:, None]
+    z = truth + rng.normal(0, sigma, (n, 2))
+    x, P = np.array([z[0, 0], z[0, 1], 0.0, 0.0]), np.diag([1.0, 1.0, 100.0, 100.0])
+    F, Q = transition(dt, 2.0)
+    xp, Pp, xf, Pf = [x], [P], [x], [P]
+    for k in range(1, n):
+        a, A = predict(x, P, F, Q)
+        x, P = update(a, A, z[k], sigma**2 * np.eye(2))
+        xp.append(a), Pp.append(A), xf.append(x), Pf.append(P)
+    return truth, dt * np.arange(n), *map(np.array, (xp, Pp, xf, Pf))
+
+
+def test_filter_learns_the_velocity():
+    v = [_filtered(np.random.default_rng(s), n=150, sigma=0.5)[-2][-1, 2:] for s in range(5)]
+    assert np.allclose(np.mean(v, axis=0), [8.0, 2.0], atol=0.5)
+    assert np.allclose(v, [8.0, 2.0], atol=1.5)
+
+
+def test_smoother_beats_the_filter_on_a_straight_track():
+    rng = np.random.default_rng(1)
+    errs = []
+    for _ in range(5):
+        truth, t, xp, Pp, xf, Pf = _filtered(rng)
+        xs = rts(t, xp, Pp, xf, Pf, 2.0)
+        errs.append((np.linalg.norm(xf[:, :2] - truth, axis=1).mean(),
+                     np.linalg.norm(xs[:, :2] - truth, axis=1).mean()))
+    filt, smooth = np.mean(errs, axis=0)
+    assert smooth < 0.8 * filt

@@ -1,0 +1,145 @@
+"""Radar scans in, tracks out (tracking/tracker.py), and the pipeline with it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from intersection_estimator.observations import Detections
+from intersection_estimator.pipeline import OnlineEstimator, PipelineConfig, radar_tracked
+from intersection_estimator.topology import TopologyConfig
+from intersection_estimator.tracking import RADAR_TRACK_ID0, RadarTracker, TrackerConfig, track_radar
+
+from .scenes import scans, stop_and_go, straight
+
+
+def _crossing(rng, clutter=0.0):
+    east = straight((-40, 0), (10, 0), 0.0, 8.0)
+    north = straight((1.5, -35), (0, 9), 0.5, 8.0)
+    return scans([east, north], 8.0, rng, clutter), (east, north)
+
+
+def _coverage(tracks: Detections, at, tid) -> float:
+    """Share of the vehicle's scans where track ``tid`` is within 2 m of it."""
+    hit = n = 0
+    for t in np.unique(tracks.t):
+        s = at(t)
+        if s is None:
+            continue
+        n += 1
+        m = (tracks.track_id == tid) & (tracks.t == t)
+        hit += bool(m.any() and np.linalg.norm(tracks.xy[m][0] - s[0]) < 2.0)
+    return hit / n
+
+
+def test_two_crossing_vehicles_make_two_tracks_along_their_paths():
+    dets, (east, north) = _crossing(np.random.default_rng(0), clutter=3.0)
+    tracks = track_radar(dets)
+    ids = np.unique(tracks.track_id)
+    assert len(ids) == 2 and (ids >= RADAR_TRACK_ID0).all()
+    for at, heading in ((east, 0.0), (north, np.pi / 2)):
+        tid = max(ids, key=lambda i: _coverage(tracks, at, i))
+        assert _coverage(tracks, at, tid) > 0.9
+        h = tracks.heading[tracks.track_id == tid]
+        assert np.abs(np.angle(np.exp(1j * (h - heading)))).max() < np.radians(10)
+
+
+def test_static_clutter_makes_no_track():
+    rng = np.random.default_rng(1)
+    assert len(track_radar(scans([], 20.0, rng, clutter_per_scan=8.0))) == 0
+
+
+def test_a_vehicle_that_stops_keeps_one_track_and_its_heading():
+    rng = np.random.default_rng(2)
+    at = stop_and_go((-40, 0), (8, 0), 3.0, 6.0, 10.0)
+    tracks = track_radar(scans([at], 10.0, rng))
+    assert len(np.unique(tracks.track_id)) == 1
+    standing = (tracks.t > 3.8) & (tracks.t < 5.5)
+    assert standing.sum() > 10 and (tracks.speed[standing] < 1.5).all()
+    assert np.abs(tracks.heading[standing]).max() < np.radians(10)
+
+
+def test_online_hands_every_row_out_once_in_stamp_order():
+    dets, _ = _crossing(np.random.default_rng(3))
+    tracker = RadarTracker()
+    out = []
+    for t in np.unique(dets.t):
+        m = dets.t == t
+        got = tracker.step(float(t), dets.xy[m], dets.doppler[m], dets.sensor_xy[m])
+        assert (got.t <= t).all()
+        out.append(got)
+    rows = Detections.concat(out)
+    assert len(np.unique(rows.track_id)) == 2
+    pairs = list(zip(rows.track_id.tolist(), rows.t.tolist()))
+    assert len(pairs) == len(set(pairs))
+    assert len(rows) >= 0.9 * len(track_radar(dets))
+
+
+def test_an_older_scan_is_counted_and_ignored():
+    tracker = RadarTracker()
+    tracker.step(1.0, np.zeros((1, 2)), np.zeros(1), np.zeros((1, 2)))
+    out = tracker.step(0.5, np.ones((3, 2)), np.zeros(3), np.zeros((3, 2)))
+    assert len(out) == 0 and tracker.scans_out_of_order == 1 and len(tracker.live) == 1
+
+
+def test_deterministic():
+    dets, _ = _crossing(np.random.default_rng(4), clutter=5.0)
+    a, b = track_radar(dets), track_radar(dets)
+    assert np.array_equal(a.xy, b.xy) and np.array_equal(a.track_id, b.track_id)
+
+
+@pytest.mark.parametrize('name, value', [('gate_sigma', 0.0), ('max_miss', 0), ('doppler_tol', -1.0)])
+def test_a_bad_setting_is_refused_by_name(name, value):
+    with pytest.raises(ValueError, match=name):
+        RadarTracker(dataclasses.replace(TrackerConfig(), **{name: value}))
+
+
+def test_raw_windows_become_tracked_and_the_switch_restores_the_paper_model():
+    dets, _ = _crossing(np.random.default_rng(5))
+    raw = dataclasses.replace(dets, track_id=np.full(len(dets), -1))
+    got, mode = radar_tracked(raw, 'raw', TrackerConfig(), TopologyConfig())
+    assert mode == 'tracked' and got.has_tracks
+    same, mode = radar_tracked(raw, 'raw', TrackerConfig(enabled=False), TopologyConfig())
+    assert mode == 'raw' and same is raw
+    assert radar_tracked(raw, 'tracked', TrackerConfig(), TopologyConfig())[1] == 'tracked'
+
+
+def test_the_online_estimator_windows_radar_as_tracks():
+    dets, _ = _crossing(np.random.default_rng(6))
+    on = OnlineEstimator(PipelineConfig(topology_samples=100, lanes_enabled=False))
+    off = OnlineEstimator(PipelineConfig(topology_samples=100, lanes_enabled=False,
+                                         radar_tracking=TrackerConfig(enabled=False)))
+    for t in np.unique(dets.t):
+        m = dets.t == t
+        assert on.add(dets.subset(m)) == off.add(dets.subset(m)) == int(m.sum())
+    assert on.window().has_tracks and not off.window().has_tracks
+    assert len(off.window()) == len(dets)
+
+
+def test_with_tracked_objects_of_its_own_the_window_keeps_radar_rows_not_radar_tracks():
+    dets, (east, _) = _crossing(np.random.default_rng(7))
+    ts = np.unique(dets.t)
+    objects = Detections.make(np.array([east(t)[0] for t in ts]), ts, heading=0.0, speed=10.0,
+                              track_id=5, label=1)
+    est = OnlineEstimator(PipelineConfig(topology_samples=100, lanes_enabled=False))
+    est.add(dets)
+    assert (est.window().track_id >= RADAR_TRACK_ID0).any()
+    est.add(objects)
+    w = est.window()
+    assert not (w.track_id >= RADAR_TRACK_ID0).any()
+    assert len(w) == len(dets) + len(objects)
+
+
+def test_a_window_of_radar_tracks_adds_no_arm_for_unexplained_parts():
+    """Descent settings per window: radar-tracker windows use ``radar_tracks_add_support``."""
+    from intersection_estimator.topology import TopologyEstimator
+    dets, _ = _crossing(np.random.default_rng(8))
+    tracks = track_radar(dets)
+    est = TopologyEstimator(TopologyConfig(), 0)
+    est.set_observations(tracks)
+    assert est._descent_cfg.descent_add_support == TopologyConfig().radar_tracks_add_support == 0
+    own = dataclasses.replace(tracks, track_id=tracks.track_id - RADAR_TRACK_ID0)
+    est.set_observations(own)
+    assert est._descent_cfg.descent_add_support == TopologyConfig().descent_add_support > 0
