@@ -116,7 +116,8 @@ def estimate(dets: Detections, *, mode: str | None = None, topology_samples: int
     state = topo.state
     return EstimateResult(best, lanelets, timing, topo.samples_drawn, n_lane,
                           topo.best_log_posterior, state, len(dets), sampler_state=state,
-                          phases_ms=_phases(topo, (t0, ta, t1, tb, t2), lane_s),
+                          phases_ms={'tracking': (t0 - tt) * 1e3,
+                                     **_phases(topo, (t0, ta, t1, tb, t2), lane_s)},
                           counters={'topology_preprocess': int(topo.preprocess_count),
                                     'topology_chains': int(topo.n_chains)},
                           observability=observability)

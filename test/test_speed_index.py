@@ -113,6 +113,8 @@ def test_profile_reads_topology_timers_when_the_estimator_has_them():
     assert ph['topology_other'] == pytest.approx(8.0) and ph['lanes_mcmc'] == pytest.approx(5.0)
     assert ph['lanes_other'] == pytest.approx(4.0)
     plain = estimate(simulate_scenario(0).detections('raw'), mode='raw', topology_samples=200, seed=0)
-    assert plain.timing_ms.keys() == {'topology', 'lanes', 'total'}    # unchanged interface
+    # the radar tracker's time is its own phase and part of the total
+    assert plain.timing_ms.keys() == {'tracking', 'topology', 'lanes', 'total'}
+    assert plain.phases_ms['tracking'] > 0 and plain.timing_ms['total'] >= plain.timing_ms['tracking']
     assert plain.phases_ms['topology_preprocess'] > 0 and plain.phases_ms['topology_chain'] > 0
     assert plain.counters['topology_chains'] >= 1

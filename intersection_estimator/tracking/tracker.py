@@ -41,6 +41,16 @@ def radar_rows_of(dets: Detections) -> np.ndarray:
     return (dets.track_id < 0) & np.isfinite(dets.doppler)
 
 
+def _line_of_sight(xy, sensor_xy, doppler):
+    """Unit vectors sensor -> row, and the Doppler; a row without a sensor position (or
+    Doppler) gets a zero line of sight and a NaN Doppler: no Doppler gate, no velocity
+    from it."""
+    los = xy - sensor_xy
+    los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
+    ok = np.isfinite(los).all(axis=1) & np.isfinite(doppler)
+    return np.where(ok[:, None], los, 0.0), np.where(ok, doppler, np.nan)
+
+
 class _Track:
     """One track: filter state, counters, and its updates (t, predicted and filtered
     state and covariance) since the last rows handed out."""
@@ -89,8 +99,7 @@ class RadarTracker:
         F, Q = transition(dt, cfg.accel_noise)
         for tr in self.live:
             tr.x, tr.P = predict(tr.x, tr.P, F, Q)
-        los = xy - sensor_xy
-        los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
+        los, doppler = _line_of_sight(xy, sensor_xy, doppler)
         owner, near = self._associate(xy, doppler, los)
         for i in np.unique(owner[owner >= 0]):
             sel = owner == i
@@ -157,7 +166,7 @@ class RadarTracker:
         k, lab = connected_components(g, directed=False)
         for j in range(k):
             rows = free[lab == j]
-            v = doppler[rows].mean() * los[rows].mean(0)
+            v = np.nan_to_num(doppler[rows]).mean() * los[rows].mean(0)
             self.live.append(_Track(xy[rows].mean(0), v, self._next_id, t, self.cfg))
             self._next_id += 1
 

@@ -143,3 +143,11 @@ def test_a_window_of_radar_tracks_adds_no_arm_for_unexplained_parts():
     own = dataclasses.replace(tracks, track_id=tracks.track_id - RADAR_TRACK_ID0)
     est.set_observations(own)
     assert est._descent_cfg.descent_add_support == TopologyConfig().descent_add_support > 0
+
+
+def test_rows_without_a_sensor_position_are_tracked_without_the_doppler():
+    dets, (east, _) = _crossing(np.random.default_rng(9))
+    blind = dataclasses.replace(dets, sensor_xy=np.full_like(dets.sensor_xy, np.nan))
+    tracks = track_radar(blind)
+    assert np.isfinite(tracks.xy).all() and np.isfinite(tracks.heading).all()
+    assert max(_coverage(tracks, east, i) for i in np.unique(tracks.track_id)) > 0.9
