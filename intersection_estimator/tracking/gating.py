@@ -38,8 +38,11 @@ def gate_distance(X: np.ndarray, P: np.ndarray, xy: np.ndarray, cfg: TrackerConf
     ``X``, covariances ``P``) in gates (``gate_sigma``); inf where a row's ``doppler`` is
     more than ``doppler_tol`` from the track's velocity along the row's line of sight ``los``."""
     S = P[:, :2, :2] + body_cov(_headings(X), cfg)
-    dx = xy[None, :, :] - X[:, None, :2]
-    d = np.sqrt(np.einsum('tri,tij,trj->tr', dx, np.linalg.inv(S), dx)) / cfg.gate_sigma
+    a, b, c = S[:, 0, 0, None], 0.5 * (S[:, 0, 1] + S[:, 1, 0])[:, None], S[:, 1, 1, None]
+    ex = xy[None, :, 0] - X[:, 0, None]
+    ey = xy[None, :, 1] - X[:, 1, None]
+    # dx' S^-1 dx with the 2 x 2 inverse in closed form
+    d = np.sqrt((c * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / (a * c - b * b)) / cfg.gate_sigma
     if doppler is not None:
         d[np.abs(X[:, 2:] @ los.T - doppler[None]) > cfg.doppler_tol] = np.inf
     return d

@@ -7,11 +7,10 @@ a measurement is the mean position of the rows a track took in one scan.
 
 from __future__ import annotations
 
+from numba import njit
 import numpy as np
 
 __all__ = ['transition', 'predict', 'update', 'rts']
-
-_H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
 
 
 def transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -27,19 +26,33 @@ def predict(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray):
     return F @ x, F @ P @ F.T + Q
 
 
-def update(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray):
-    """Kalman update with a position measurement ``z`` of covariance ``R``."""
-    K = P[:, :2] @ np.linalg.inv(P[:2, :2] + R)
-    return x + K @ (z - x[:2]), (np.eye(4) - K @ _H) @ P
+@njit(cache=True)
+def update(x: np.ndarray, P: np.ndarray, z: np.ndarray, r: float):
+    """Kalman update with a position measurement ``z`` of covariance ``r`` I (the 2 x 2
+    innovation covariance inverted in closed form: one scan's update is a few flops, so
+    the call overhead of general routines was most of the tracker's time)."""
+    a, b, d = P[0, 0] + r, P[0, 1], P[1, 1] + r
+    det = a * d - b * P[1, 0]
+    ia, ib, ic, id_ = d / det, -P[0, 1] / det, -P[1, 0] / det, a / det
+    K = np.empty((4, 2))
+    for i in range(4):
+        K[i, 0] = P[i, 0] * ia + P[i, 1] * ic
+        K[i, 1] = P[i, 0] * ib + P[i, 1] * id_
+    e0, e1 = z[0] - x[0], z[1] - x[1]
+    x2 = x + K[:, 0] * e0 + K[:, 1] * e1
+    P2 = P - K[:, 0:1] * P[0:1, :] - K[:, 1:2] * P[1:2, :]
+    return x2, P2
 
 
+@njit(cache=True)
 def rts(t: np.ndarray, xp: np.ndarray, Pp: np.ndarray, xf: np.ndarray, Pf: np.ndarray,
         q: float) -> np.ndarray:
     """Smoothed states of one track from its predicted (``xp``, ``Pp``) and filtered
     (``xf``, ``Pf``) states at the update times ``t`` (Rauch, Tung and Striebel 1965)."""
     xs, Ps = xf.copy(), Pf.copy()
+    F = np.eye(4)
     for k in range(len(t) - 2, -1, -1):
-        F, _ = transition(t[k + 1] - t[k], q)
+        F[0, 2] = F[1, 3] = t[k + 1] - t[k]
         C = Ps[k] @ F.T @ np.linalg.inv(Pp[k + 1])
         xs[k] = xs[k] + C @ (xs[k + 1] - xp[k + 1])
         Ps[k] = Ps[k] + C @ (Ps[k + 1] - Pp[k + 1]) @ C.T

@@ -138,7 +138,7 @@ class RadarTracker:
 
     def _update(self, tr: _Track, z, k: int, t: float) -> None:
         xp, Pp = tr.x.copy(), tr.P.copy()
-        tr.x, tr.P = update(tr.x, tr.P, z, self.cfg.row_var / k * np.eye(2))
+        tr.x, tr.P = update(tr.x, tr.P, z, self.cfg.row_var / k)
         tr.hits += 1
         tr.miss = -1
         tr.hist.append((t, xp, Pp, tr.x.copy(), tr.P.copy()))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 
 from intersection_estimator.tracking.kalman import predict, rts, transition, update
@@ -29,7 +30,7 @@ def _filtered(rng, n=80, dt=0.1, v=(8.0, 2.0), sigma=1.0):
     xp, Pp, xf, Pf = [x], [P], [x], [P]
     for k in range(1, n):
         a, A = predict(x, P, F, Q)
-        x, P = update(a, A, z[k], sigma**2 * np.eye(2))
+        x, P = update(a, A, z[k], sigma**2)
         xp.append(a), Pp.append(A), xf.append(x), Pf.append(P)
     return truth, dt * np.arange(n), *map(np.array, (xp, Pp, xf, Pf))
 
@@ -50,3 +51,18 @@ def test_smoother_beats_the_filter_on_a_straight_track():
                      np.linalg.norm(xs[:, :2] - truth, axis=1).mean()))
     filt, smooth = np.mean(errs, axis=0)
     assert smooth < 0.8 * filt
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.01, 10.0))
+def test_the_compiled_update_is_the_kalman_update(seed, r):
+    """Closed-form 2 x 2 inverse against K = P H' (H P H' + R)^-1 on random covariances."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(4, 4))
+    P = A @ A.T + 0.1 * np.eye(4)
+    x, z = rng.normal(size=4), rng.normal(size=2)
+    H = np.eye(2, 4)
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + r * np.eye(2))
+    x2, P2 = update(x, P, z, r)
+    assert np.allclose(x2, x + K @ (z - H @ x), rtol=1e-9, atol=1e-9)
+    assert np.allclose(P2, (np.eye(4) - K @ H) @ P, rtol=1e-9, atol=1e-9)
