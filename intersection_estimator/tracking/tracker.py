@@ -59,6 +59,8 @@ class _Track:
 
     def __init__(self, z, v, tid: int, t: float, cfg: TrackerConfig):
         self.x = np.array([z[0], z[1], v[0], v[1]])
+        # position: the mean of a cluster of rows (~0.6 m); velocity: Doppler along the
+        # line of sight only, the rest unknown within velocity_sigma0
         self.P = np.diag([0.36, 0.36, cfg.velocity_sigma0**2, cfg.velocity_sigma0**2])
         self.hits, self.miss, self.id = 1, 0, tid
         self.hist = [(t, self.x.copy(), self.P.copy(), self.x.copy(), self.P.copy())]
