@@ -78,6 +78,13 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('radar_tracking', True, 'radar rows go through the radar tracker and enter the window as '
               'tracks (the lane course then runs on radar alone); false = the paper\'s raw-detection '
               'model (radar rows voxelised, straight lanelets)'),
+    ParamSpec('radar_track_spread_along', 1.64, 'radar tracker: spread of one radar return about the '
+              "vehicle's center along its heading (body and noise) [m]", 0.05, 20.0),
+    ParamSpec('radar_track_spread_across', 1.13, 'radar tracker: the same across the heading [m]',
+              0.05, 20.0),
+    ParamSpec('radar_track_doppler_tol', 4.0, "radar tracker: a return joins a track only when its "
+              "Doppler is within this of the track's velocity along the line of sight [m/s]",
+              0.1, 100.0),
     ParamSpec('reset_distance', 25.0, 'ego past the center by this -> start on the next intersection [m]',
               1.0, 1000.0),
     ParamSpec('seed', 0, 'seed of every random draw', 0, 2**31 - 1),
@@ -191,6 +198,9 @@ def pipeline_config(values: dict):
                   reset_distance=float(values['reset_distance']),
                   topology=replace(TopologyConfig(), weak_labels=weak),
                   lanes=replace(LaneConfig(), skip_labels=weak),
-                  radar_tracking=replace(TrackerConfig(), enabled=bool(values['radar_tracking'])))
+                  radar_tracking=replace(TrackerConfig(), enabled=bool(values['radar_tracking']),
+                                         body_along_m=float(values['radar_track_spread_along']),
+                                         body_across_m=float(values['radar_track_spread_across']),
+                                         doppler_tol=float(values['radar_track_doppler_tol'])))
     cfg.validate()
     return cfg

@@ -18,7 +18,8 @@ def test_defaults_are_valid_and_match_the_shipped_yaml():
 @pytest.mark.parametrize('name, value', [
     ('budget_ms', -5.0), ('budget_ms', float('nan')), ('timer_period', 0.0), ('lane_share', 1.0),
     ('doppler_sign', 0), ('seed', -1), ('window_s', 'long'), ('lanes_enabled', 1),
-    ('min_existence_probability', 1.5), ('radar_topics', '/not/a/list')])
+    ('min_existence_probability', 1.5), ('radar_topics', '/not/a/list'),
+    ('radar_tracking', 'yes'), ('radar_track_spread_along', 0.0), ('radar_track_doppler_tol', -1.0)])
 def test_bad_value_is_refused_naming_the_parameter(name, value):
     reason = P.check(name, value)
     assert reason is not None and name in reason
@@ -54,3 +55,11 @@ def test_weak_labels_reach_the_topology_and_bad_ones_are_refused():
     assert none.topology.weak_labels == none.lanes.skip_labels == ()
     for bad in (['bike'], [6.5], [300], [True]):
         assert any('weak_labels' in e for e in P.check_all(dict(P.defaults(), weak_labels=bad)))
+
+
+def test_radar_tracker_parameters_reach_the_pipeline():
+    cfg = P.pipeline_config(dict(P.defaults(), radar_tracking=False, radar_track_spread_along=2.0,
+                                 radar_track_spread_across=1.5, radar_track_doppler_tol=3.0))
+    t = cfg.radar_tracking
+    assert (t.enabled, t.body_along_m, t.body_across_m, t.doppler_tol) == (False, 2.0, 1.5, 3.0)
+    assert P.pipeline_config(P.defaults()).radar_tracking.enabled
