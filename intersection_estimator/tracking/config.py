@@ -53,7 +53,7 @@ class TrackerConfig:
     min_speed: float = 1.0
     merge_gates: float = 0.5
     merge_speed: float = 2.0
-    max_backlog: int = 3000
+    max_backlog: int = 600         # 60 s of a parked car at 10 Hz
 
     def validate(self) -> 'TrackerConfig':
         """Raise ValueError naming the first parameter outside its allowed range."""

@@ -151,3 +151,16 @@ def test_rows_without_a_sensor_position_are_tracked_without_the_doppler():
     tracks = track_radar(blind)
     assert np.isfinite(tracks.xy).all() and np.isfinite(tracks.heading).all()
     assert max(_coverage(tracks, east, i) for i in np.unique(tracks.track_id)) > 0.9
+
+
+def test_online_a_parked_car_holds_at_most_max_backlog_updates():
+    """A standing object is never reported (it never moved); online its track keeps only the
+    newest ``max_backlog`` updates, so memory stays bounded however long it stands."""
+    parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 30.0)
+    dets = scans([parked], 30.0, np.random.default_rng(10))
+    tracker = RadarTracker(dataclasses.replace(TrackerConfig(), max_backlog=40))
+    for t in np.unique(dets.t):
+        m = dets.t == t
+        assert len(tracker.step(float(t), dets.xy[m], dets.doppler[m], dets.sensor_xy[m])) == 0
+    assert len(tracker.live) == 1 and tracker.live[0].hits > 250
+    assert len(tracker.live[0].hist) <= 40
