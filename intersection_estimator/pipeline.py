@@ -23,7 +23,7 @@ from .observations import Detections
 from .ranges import check_table
 from .topology import TopologyConfig, TopologyEstimator
 from .topology.preprocess import radar_filter
-from .tracking import RADAR_TRACK_ID0, RadarTracker, TrackerConfig, radar_rows_of, track_radar
+from .tracking import RadarTracker, TrackerConfig, is_radar_track, radar_rows_of, track_radar
 
 __all__ = ['EstimateResult', 'PipelineConfig', 'OnlineEstimator', 'estimate', 'mode_of', 'needs_sampling',
            'IDLE_SAMPLING_TICKS']
@@ -324,17 +324,11 @@ class OnlineEstimator:
     def _radar_tracks(self, dets: Detections) -> Detections:
         """The rows the tracker hands out for the radar rows of ``dets`` (one scan per
         stamp, in stamp order; rows the clutter filter drops are no scan's)."""
-        radar = radar_rows_of(dets)
-        if not radar.any():
+        if not radar_rows_of(dets).any():
             return Detections.empty()
-        d = dets.subset(radar & radar_filter(dets, self._clutter_cfg, moving_only=False))
-        d = d.subset(np.argsort(d.t, kind='stable'))
-        ts, starts = np.unique(d.t, return_index=True)
-        out = []
+        keep = radar_filter(dets, self._clutter_cfg, moving_only=False)
         with self._lock:
-            for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
-                out.append(self._tracker.step(float(t), d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b]))
-        return Detections.concat(out)
+            return self._tracker.feed(dets, keep)
 
     @staticmethod
     def _estimated(dets: Detections) -> Detections:
@@ -342,7 +336,7 @@ class OnlineEstimator:
         radar tracks are left out (the radar rows count as in the paper, beside the
         objects); without, and once the tracker reported a track, the radar tracks replace
         the radar rows (as :func:`radar_tracked` does for a batch)."""
-        radar_track = dets.track_id >= RADAR_TRACK_ID0
+        radar_track = is_radar_track(dets.track_id)
         if not radar_track.any():
             return dets
         if ((dets.track_id >= 0) & ~radar_track).any():

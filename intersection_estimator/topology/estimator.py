@@ -27,7 +27,7 @@ import numpy as np
 
 from ..model import Intersection
 from ..observations import Detections
-from ..tracking.tracker import RADAR_TRACK_ID0
+from ..tracking.tracker import is_radar_track
 from .config import Tables, TopologyConfig
 from .descent import descend
 from .init import initial_state
@@ -72,6 +72,7 @@ class TopologyEstimator:
         """Forget observations and chains."""
         self._dets = Detections.empty()
         self._tracked = False                  # self._dets.has_tracks, read per chunk
+        self._radar_tracks = False             # every track from the radar tracker
         self._radar = None                     # radar_rows(self._dets), made on first use
         self._tracks = None                    # side_by_side.tracks_of(self._dets), ditto
         #: likelihood work counters of the chains and of the descents
@@ -100,7 +101,7 @@ class TopologyEstimator:
         self._dets = dets.finite()
         self._tracked = self._dets.has_tracks
         ids = self._dets.track_id[self._dets.track_id >= 0]
-        self._radar_tracks = bool(len(ids)) and bool((ids >= RADAR_TRACK_ID0).all())
+        self._radar_tracks = bool(len(ids)) and bool(is_radar_track(ids).all())
         self._radar = None
         self._tracks = None
         self._since_data = 0
@@ -340,7 +341,7 @@ class TopologyEstimator:
         """The descent's settings: a window whose tracks all come from the radar tracker
         adds arms for unexplained parts from ``radar_tracks_add_support`` passages (a radar
         track that breaks inside the box leaves parts no arm explains)."""
-        if getattr(self, '_radar_tracks', False) and \
+        if self._radar_tracks and \
                 self.cfg.radar_tracks_add_support != self.cfg.descent_add_support:
             return replace(self.cfg, descent_add_support=self.cfg.radar_tracks_add_support)
         return self.cfg

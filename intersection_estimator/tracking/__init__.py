@@ -10,6 +10,6 @@ tracks), ``tracker`` (scans in, tracked rows out).
 """
 
 from .config import TrackerConfig
-from .tracker import RADAR_TRACK_ID0, RadarTracker, radar_rows_of, track_radar
+from .tracker import RADAR_TRACK_ID0, RadarTracker, is_radar_track, radar_rows_of, track_radar
 
-__all__ = ['TrackerConfig', 'RadarTracker', 'RADAR_TRACK_ID0', 'track_radar', 'radar_rows_of']
+__all__ = ['TrackerConfig', 'RadarTracker', 'RADAR_TRACK_ID0', 'track_radar', 'radar_rows_of', 'is_radar_track']

@@ -14,8 +14,7 @@ _RANGES = {
     'spawn_gates': ('[1, 20]', 'rows within this many gates of a track start no new track'),
     'doppler_tol': ('(0, inf)', "|predicted radial speed - a row's Doppler| a track accepts [m/s]"),
     'max_miss': ('[1, 1000]', 'scans without rows before a track ends'),
-    'confirm': ('[1, 1000]', 'updates before a track is reported'),
-    'min_rows': ('[0, 100000]', 'rows of a reported track'),
+    'min_rows': ('[0, 100000]', 'updates (rows) before a track is reported'),
     'min_path_m': ('[0, 1000]', 'first-to-last distance of a reported track [m]'),
     'accel_noise': ('(0, 1000]', 'white-acceleration density of the constant-velocity model [m^2/s^3]'),
     'body_along_m': ('(0, 20]', "spread of one radar row along the vehicle's heading [m]"),
@@ -42,7 +41,6 @@ class TrackerConfig:
     spawn_gates: float = 2.0
     doppler_tol: float = 4.0
     max_miss: int = 5
-    confirm: int = 5
     min_rows: int = 20
     min_path_m: float = 10.0
     accel_noise: float = 2.0

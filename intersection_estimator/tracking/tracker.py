@@ -6,9 +6,9 @@ with the mean of its rows (:func:`.kalman.update`, variance ``row_var`` / rows).
 farther than ``spawn_gates`` from every track are clustered (single linkage within
 ``cluster_m``) and each cluster starts a track whose velocity is its Doppler along the line
 of sight. Two tracks on one vehicle: the younger ends (:func:`.gating.duplicates`). A
-track ends after ``max_miss`` scans without rows and is reported once it has ``confirm``
-updates, ``min_rows`` rows, ``min_path_m`` between its first and last position and has
-moved (``min_speed``); while it stands its rows keep the heading it last drove.
+track ends after ``max_miss`` scans without rows and is reported once it has ``min_rows``
+updates (one row each), ``min_path_m`` between its first and last position and has moved
+(``min_speed``); while it stands its rows keep the heading it last drove.
 
 Online (:meth:`RadarTracker.step`) a track's rows are filtered states, handed out when
 the track is reported and then scan by scan; in a batch (:func:`track_radar`) every
@@ -30,7 +30,7 @@ from .config import TrackerConfig
 from .gating import duplicates, gate_distance
 from .kalman import predict, rts, transition, update
 
-__all__ = ['RADAR_TRACK_ID0', 'RadarTracker', 'track_radar', 'radar_rows_of']
+__all__ = ['RADAR_TRACK_ID0', 'RadarTracker', 'track_radar', 'radar_rows_of', 'is_radar_track']
 
 #: track ids of radar tracks start here (apart from a tracked-objects topic's ids)
 RADAR_TRACK_ID0 = 1 << 40
@@ -39,6 +39,11 @@ RADAR_TRACK_ID0 = 1 << 40
 def radar_rows_of(dets: Detections) -> np.ndarray:
     """Mask of radar rows: no identity, a finite Doppler."""
     return (dets.track_id < 0) & np.isfinite(dets.doppler)
+
+
+def is_radar_track(track_id: np.ndarray) -> np.ndarray:
+    """Mask of rows this tracker made (ids from :data:`RADAR_TRACK_ID0`)."""
+    return track_id >= RADAR_TRACK_ID0
 
 
 def _line_of_sight(xy, sensor_xy, doppler):
@@ -69,9 +74,9 @@ class _Track:
         self.heading = math.nan
         self.reported = False
 
-    def passes(self, n_rows: int, cfg: TrackerConfig) -> bool:
+    def passes(self, cfg: TrackerConfig) -> bool:
         """Is the track reported (its rows handed out)?"""
-        return (self.hits >= cfg.confirm and n_rows >= cfg.min_rows and self.moved
+        return (self.hits >= cfg.min_rows and self.moved
                 and float(np.hypot(*(self.x[:2] - self.start))) >= cfg.min_path_m)
 
 
@@ -117,22 +122,35 @@ class RadarTracker:
             return self._hand_out()
         return Detections.empty()
 
+    def feed(self, dets: Detections, keep: np.ndarray | None = None) -> Detections:
+        """The radar rows of ``dets`` (those ``keep`` keeps, a mask; default all) as scans,
+        one per stamp in stamp order; returns the rows handed out (online)."""
+        m = radar_rows_of(dets) if keep is None else (keep & radar_rows_of(dets))
+        d = dets.subset(m)
+        d = d.subset(np.argsort(d.t, kind='stable'))
+        ts, starts = np.unique(d.t, return_index=True)
+        return Detections.concat([self.step(float(t), d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b])
+                                  for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)])])
+
     def finish(self) -> Detections:
         """Batch: every reported track of the scans so far, smoothed."""
         rows = []
         for tr in self.ended + self.live:
-            if tr.passes(len(tr.hist), self.cfg):
+            if tr.passes(self.cfg):
                 rows.append(self._rows(tr, smooth=True))
         return Detections.concat(rows)
 
     # -- internals ----------------------------------------------------------------------
+    def _states(self) -> tuple[np.ndarray, np.ndarray]:
+        """States (n, 4) and covariances (n, 4, 4) of the live tracks."""
+        return np.array([tr.x for tr in self.live]), np.array([tr.P for tr in self.live])
+
     def _associate(self, xy, doppler, los):
         """Owner track of every row (-1: none) and rows near a track (they start none)."""
         n = len(xy)
         if not self.live or n == 0:
             return np.full(n, -1), np.zeros(n, bool)
-        X = np.array([tr.x for tr in self.live])
-        P = np.array([tr.P for tr in self.live])
+        X, P = self._states()
         d = gate_distance(X, P, xy, self.cfg, doppler, los)
         best = np.argmin(d, axis=0)
         dmin = d[best, np.arange(n)]
@@ -152,8 +170,7 @@ class RadarTracker:
     def _end_duplicates(self) -> None:
         if len(self.live) < 2:
             return
-        X = np.array([tr.x for tr in self.live])
-        P = np.array([tr.P for tr in self.live])
+        X, P = self._states()
         gone = set(duplicates(X, P, np.array([tr.hits for tr in self.live]), self.cfg).tolist())
         if gone:
             self.ended += [tr for k, tr in enumerate(self.live) if k in gone]
@@ -178,7 +195,7 @@ class RadarTracker:
         for tr in self.live:
             if tr.miss != 0:
                 continue                      # no update this scan: nothing new
-            if tr.reported or tr.passes(tr.hits, self.cfg):
+            if tr.reported or tr.passes(self.cfg):
                 tr.reported = True
                 out.append(self._rows(tr, smooth=False))
                 tr.hist = tr.hist[-1:]
@@ -217,11 +234,6 @@ class RadarTracker:
 def track_radar(dets: Detections, cfg: TrackerConfig | None = None, clutter=None) -> Detections:
     """Batch: the radar rows of ``dets`` (those ``clutter`` keeps, a mask; default all)
     scan by scan through a :class:`RadarTracker`, reported tracks smoothed."""
-    m = radar_rows_of(dets) if clutter is None else (clutter & radar_rows_of(dets))
-    d = dets.subset(m)
-    d = d.subset(np.argsort(d.t, kind='stable'))
     tracker = RadarTracker(cfg, keep_history=True)
-    ts, starts = np.unique(d.t, return_index=True)
-    for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
-        tracker.step(float(t), d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b])
+    tracker.feed(dets, clutter)
     return tracker.finish()
