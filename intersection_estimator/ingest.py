@@ -133,9 +133,16 @@ class Ingest:
         """Add to the window; counts rows it refused (non-finite) and the observations that
         gave way to the max_observations cap (a burst degrades to dropping, counted)."""
         before = getattr(estimator, 'evicted', 0)
+        late = getattr(estimator, 'radar_scans_late', 0)
         added = estimator.add(dets)
         if len(dets) > added:
             self.dropped['non_finite'] += len(dets) - added
+        late = getattr(estimator, 'radar_scans_late', 0) - late
+        if late:
+            self.dropped['radar_scan_late'] += late
+            self.warn('radar_scan_late', f'{late} radar scan(s) came more than radar_track_reorder_s='
+                      f'{self.values["radar_track_reorder_s"]:g} s after a newer one: left out of the radar '
+                      'tracks (radars with different latencies need a larger radar_track_reorder_s)')
         pushed = getattr(estimator, 'evicted', 0) - before
         if pushed:
             self.dropped['window_full'] += pushed

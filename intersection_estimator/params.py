@@ -85,6 +85,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('radar_track_doppler_tol', 4.0, "radar tracker: a return joins a track only when its "
               "Doppler is within this of the track's velocity along the line of sight [m/s]",
               0.1, 100.0),
+    ParamSpec('radar_track_reorder_s', 0.2, 'radar tracker: scans are held this long (stamp time) and '
+              'tracked in stamp order, so that radars with different latencies interleave; a scan later '
+              'than this is dropped, counted as radar_scan_late [s]', 0.0, 10.0),
     ParamSpec('reset_distance', 25.0, 'ego past the center by this -> start on the next intersection [m]',
               1.0, 1000.0),
     ParamSpec('seed', 0, 'seed of every random draw', 0, 2**31 - 1),
@@ -201,6 +204,7 @@ def pipeline_config(values: dict):
                   radar_tracking=replace(TrackerConfig(), enabled=bool(values['radar_tracking']),
                                          body_along_m=float(values['radar_track_spread_along']),
                                          body_across_m=float(values['radar_track_spread_across']),
-                                         doppler_tol=float(values['radar_track_doppler_tol'])))
+                                         doppler_tol=float(values['radar_track_doppler_tol']),
+                                         reorder_s=float(values['radar_track_reorder_s'])))
     cfg.validate()
     return cfg

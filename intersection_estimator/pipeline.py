@@ -344,9 +344,10 @@ class OnlineEstimator:
         return dets.subset(~radar_rows_of(dets))
 
     @property
-    def radar_scans_out_of_order(self) -> int:
-        """Radar scans older than the tracker's last, ignored (0 without the tracker)."""
-        return 0 if self._tracker is None else self._tracker.scans_out_of_order
+    def radar_scans_late(self) -> int:
+        """Radar scans that came after the tracker had gone past their stamp (later than its
+        ``reorder_s``), left out of the tracks (0 without the tracker)."""
+        return 0 if self._tracker is None else self._tracker.scans_late
 
     def _make_room(self, n: int) -> None:
         """Drop the oldest parts (the front one maybe in part, as a view: no copy) so that

@@ -25,6 +25,7 @@ _RANGES = {
     'merge_gates': ('[0, 20]', 'two tracks this many gates apart, same velocity: the younger ends'),
     'merge_speed': ('[0, 50]', '... velocities within this [m/s]'),
     'max_backlog': ('[1, 1000000]', 'rows a track holds before it is reported (memory cap)'),
+    'reorder_s': ('[0, 10]', 'online: scans are held this long [s of stamp time] and tracked in stamp order'),
 }
 
 
@@ -52,6 +53,7 @@ class TrackerConfig:
     merge_gates: float = 0.5
     merge_speed: float = 2.0
     max_backlog: int = 600         # 60 s of a parked car at 10 Hz
+    reorder_s: float = 0.2         # radars of one vehicle arrive up to ~2 scans apart
 
     def validate(self) -> 'TrackerConfig':
         """Raise ValueError naming the first parameter outside its allowed range."""

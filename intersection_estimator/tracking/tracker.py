@@ -10,14 +10,22 @@ track ends after ``max_miss`` scans without rows and is reported once it has ``m
 updates (one row each), ``min_path_m`` between its first and last position and has moved
 (``min_speed``); while it stands its rows keep the heading it last drove.
 
-Online (:meth:`RadarTracker.step`) a track's rows are filtered states, handed out when
+Online (:meth:`RadarTracker.feed`) a track's rows are filtered states, handed out when
 the track is reported and then scan by scan; in a batch (:func:`track_radar`) every
 reported track is smoothed (:func:`.kalman.rts`) once all scans are in. Deterministic: no
 random draw.
+
+Online, scans arrive in receive order, not stamp order: several radars on one vehicle
+reach the node with different latencies (a corner radar's scan stamped before the front
+radar's last one arrives after it). A filter can only go forward in time, so scans are held
+``reorder_s`` of stamp time (:meth:`RadarTracker.feed`) and tracked in stamp order, scans
+of one stamp as one; a scan older than the last one tracked is late: counted
+(:attr:`RadarTracker.scans_late`) and left out.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -34,6 +42,8 @@ __all__ = ['RADAR_TRACK_ID0', 'RadarTracker', 'track_radar', 'radar_rows_of', 'i
 
 #: track ids of radar tracks start here (apart from a tracked-objects topic's ids)
 RADAR_TRACK_ID0 = 1 << 40
+#: online: at most this many stamps held for reordering (memory cap; the oldest go first)
+MAX_HELD = 256
 
 
 def radar_rows_of(dets: Detections) -> np.ndarray:
@@ -92,13 +102,14 @@ class RadarTracker:
         self.ended: list[_Track] = []
         self.t: float | None = None
         self._next_id = 0
-        self.scans_out_of_order = 0
+        self.scans_late = 0
+        self._held: dict[float, list[tuple]] = {}     # online: stamp -> its scans' rows, not yet tracked
 
     def step(self, t: float, xy: np.ndarray, doppler: np.ndarray, sensor_xy: np.ndarray) -> Detections:
         """One scan of filtered radar rows at stamp ``t``; returns the tracked rows handed
-        out now (online). A scan older than the last is counted and ignored."""
+        out now (online). A scan older than the last is late: counted and ignored."""
         if self.t is not None and t < self.t:
-            self.scans_out_of_order += 1
+            self.scans_late += 1
             return Detections.empty()
         dt = 0.0 if self.t is None else t - self.t
         self.t = t
@@ -124,13 +135,35 @@ class RadarTracker:
 
     def feed(self, dets: Detections, keep: np.ndarray | None = None) -> Detections:
         """The radar rows of ``dets`` (those ``keep`` keeps, a mask; default all) as scans,
-        one per stamp in stamp order; returns the rows handed out (online)."""
+        one per stamp; returns the rows handed out (online).
+
+        Batch (``keep_history``): every scan at once, in stamp order. Online: the scans join
+        the held ones and those ``reorder_s`` older than the newest stamp held are tracked,
+        in stamp order (module docstring); :meth:`flush` tracks the rest."""
         m = radar_rows_of(dets) if keep is None else (keep & radar_rows_of(dets))
         d = dets.subset(m)
         d = d.subset(np.argsort(d.t, kind='stable'))
         ts, starts = np.unique(d.t, return_index=True)
-        return Detections.concat([self.step(float(t), d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b])
-                                  for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)])])
+        for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
+            if self.t is not None and t < self.t:
+                self.scans_late += 1                  # its stamp is already behind the tracks
+                continue
+            self._held.setdefault(float(t), []).append((d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b]))
+        held = sorted(self._held)
+        if self.keep_history or not held:
+            return self.flush()
+        n = max(bisect.bisect_right(held, held[-1] - self.cfg.reorder_s), len(held) - MAX_HELD)
+        return Detections.concat([self._step_held(t) for t in held[:n]])
+
+    def flush(self) -> Detections:
+        """Online: track every held scan now (end of the input); returns the rows handed out."""
+        return Detections.concat([self._step_held(t) for t in sorted(self._held)])
+
+    def _step_held(self, t: float) -> Detections:
+        parts = self._held.pop(t)
+        if len(parts) == 1:
+            return self.step(t, *parts[0])
+        return self.step(t, *(np.concatenate(c) for c in zip(*parts)))
 
     def finish(self) -> Detections:
         """Batch: every reported track of the scans so far, smoothed."""

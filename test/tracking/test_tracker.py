@@ -11,6 +11,7 @@ from intersection_estimator.observations import Detections
 from intersection_estimator.pipeline import OnlineEstimator, PipelineConfig, radar_tracked
 from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.tracking import RADAR_TRACK_ID0, RadarTracker, TrackerConfig, track_radar
+from intersection_estimator.tracking.tracker import MAX_HELD
 
 from .scenes import scans, stop_and_go, straight
 
@@ -81,7 +82,47 @@ def test_an_older_scan_is_counted_and_ignored():
     tracker = RadarTracker()
     tracker.step(1.0, np.zeros((1, 2)), np.zeros(1), np.zeros((1, 2)))
     out = tracker.step(0.5, np.ones((3, 2)), np.zeros(3), np.zeros((3, 2)))
-    assert len(out) == 0 and tracker.scans_out_of_order == 1 and len(tracker.live) == 1
+    assert len(out) == 0 and tracker.scans_late == 1 and len(tracker.live) == 1
+
+
+def _two_radars_in_arrival_order(dets, latency_b: float):
+    """Scans of ``dets`` alternately from radar A (no latency) and radar B (``latency_b``),
+    as messages in the order they arrive."""
+    msgs = []
+    for k, t in enumerate(np.unique(dets.t)):
+        msgs.append((t + (latency_b if k % 2 else 0.0), k, dets.subset(dets.t == t)))
+    return [m for _, _, m in sorted(msgs, key=lambda m: m[:2])]
+
+
+def _online(msgs, cfg=None):
+    tracker = RadarTracker(cfg)
+    rows = Detections.concat([tracker.feed(m) for m in msgs] + [tracker.flush()])
+    return rows, tracker
+
+
+def test_two_radars_arriving_out_of_order_are_tracked_in_stamp_order():
+    dets, _ = _crossing(np.random.default_rng(3))
+    in_order, _ = _online(_two_radars_in_arrival_order(dets, 0.0))
+    late = _two_radars_in_arrival_order(dets, 0.15)     # B's scan arrives after A's next one
+    assert [m.t[0] for m in late] != sorted(m.t[0] for m in late)
+    rows, tracker = _online(late)
+    assert tracker.scans_late == 0 and len(np.unique(rows.track_id)) == 2
+    assert np.array_equal(rows.xy, in_order.xy) and np.array_equal(rows.t, in_order.t)
+    rows, tracker = _online(late, dataclasses.replace(TrackerConfig(), reorder_s=0.0))
+    assert tracker.scans_late > 0.3 * len(late)         # without the hold B's scans are late
+
+
+def test_scans_of_one_stamp_are_one_scan_and_the_hold_is_capped():
+    dets, _ = _crossing(np.random.default_rng(3))
+    a, b = dets.subset(np.arange(len(dets)) % 2 == 0), dets.subset(np.arange(len(dets)) % 2 == 1)
+    split, _ = _online([p.subset(p.t == t) for t in np.unique(dets.t) for p in (a, b)])
+    whole, _ = _online([dets.subset(dets.t == t) for t in np.unique(dets.t)])
+    assert split.xy.shape == whole.xy.shape and np.allclose(split.xy, whole.xy, atol=1e-9)
+    tracker = RadarTracker(dataclasses.replace(TrackerConfig(), reorder_s=10.0))
+    for t in np.arange(400) * 0.01:
+        tracker.feed(Detections.make(np.zeros((1, 2)), np.array([t]), doppler=np.array([5.0]),
+                                     sensor_xy=np.array([[0.0, -30.0]])))
+        assert len(tracker._held) <= MAX_HELD
 
 
 def test_deterministic():
