@@ -23,6 +23,11 @@ from .preprocess import PreprocessConfig, radar_filter, unit_vectors
 from .state import pack_state
 from .voxels import voxelise
 
+#: [m] the box around the center whose observations do not place the arms' axes
+#: (:func:`lane_guess`) and beyond which the axes' meeting point is no refinement
+#: (:func:`initial_lanes`)
+BOX_M = 8.0
+
 __all__ = ['initial_state', 'seed_lines', 'initial_center', 'initial_arm_angles', 'complete_arms',
            'initial_lanes', 'irls_center', 'lane_guess', 'local_pca']
 
@@ -130,10 +135,11 @@ def initial_lanes(obs: ObservationSet, center, angles, lane_width: float, max_la
                   gap_max: float, traffic_side: int = 1, iters: int = 3, width_range=None):
     """Refine the center from the arms' median axes and guess gap / lane counts per arm.
 
-    Observations are assigned to the arm whose axis they run along (outside 8 m, roughly
-    parallel when oriented); per arm the median axis lies halfway between the innermost
-    entering and the innermost leaving observations; the center is the least-squares
-    meeting point of these axes; lane counts (and, with ``width_range``, the lane width)
+    Observations are assigned to the arm whose axis they run along (outside ``BOX_M``,
+    roughly parallel when oriented); per arm the median axis lies halfway between the
+    innermost entering and the innermost leaving observations; the center is the
+    least-squares meeting point of these axes -- kept only within ``BOX_M`` of ``center``
+    (else ``center`` stays); lane counts (and, with ``width_range``, the lane width)
     follow from the lateral spread. Returns
     (center, [(gap, lanes_in, lanes_out, width), ...]).
     """
@@ -141,12 +147,23 @@ def initial_lanes(obs: ObservationSet, center, angles, lane_width: float, max_la
     params = [(0.0, 1, 1, lane_width)] * len(angles)
     if len(obs) == 0 or len(angles) == 0:
         return c, params
-    cx, cy, P = lane_guess(obs.x, obs.y, obs.hx, obs.hy, obs.has_o, obs.d,
-                           np.asarray(obs.w, float), float(c[0]), float(c[1]),
-                           np.asarray(angles, float), float(lane_width), int(max_lanes),
-                           float(gap_max), float(traffic_side), int(iters),
-                           *((float(width_range[0]), float(width_range[1]), True)
-                             if width_range is not None else (lane_width, lane_width, False)))
+    widths = ((float(width_range[0]), float(width_range[1]), True) if width_range is not None
+              else (lane_width, lane_width, False))
+
+    def guess(n_iter):
+        return lane_guess(obs.x, obs.y, obs.hx, obs.hy, obs.has_o, obs.d,
+                          np.asarray(obs.w, float), float(c[0]), float(c[1]),
+                          np.asarray(angles, float), float(lane_width), int(max_lanes),
+                          float(gap_max), float(traffic_side), int(n_iter), *widths)
+
+    cx, cy, P = guess(iters)
+    if math.hypot(cx - c[0], cy - c[1]) > BOX_M:
+        # The axes meet outside the box whose observations placed them: nearly parallel
+        # axes (two arms of one road) or a bent arm's axis extrapolated -- SUMO seed 92's
+        # moved 52 m down the road. That is no refinement: keep the driving lines' center
+        # and the lanes as seen from it (one pass: its lanes are read before its move).
+        _, _, P = guess(1)
+        cx, cy = c
     return np.array([cx, cy]), [(float(g), int(ni), int(no), float(wd)) for g, ni, no, wd in P]
 
 
@@ -333,7 +350,7 @@ def lane_guess(x, y, hx, hy, has_o, dcls, w, cx, cy, angles, lane_width, max_lan
             for k in range(na):
                 sk = px * ux[k] + py * uy[k]
                 tk = py * ux[k] - px * uy[k]
-                ok = sk > 8.0 and abs(tk) < 25.0
+                ok = sk > BOX_M and abs(tk) < 25.0
                 if ok and has_o[i]:
                     ok = abs(hx[i] * ux[k] + hy[i] * uy[k]) > cos20
                 if ok and abs(tk) < best:

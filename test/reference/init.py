@@ -102,6 +102,11 @@ def initial_lanes_reference(obs: ObservationSet, center, angles, lane_width: flo
             b += wk * nrm[k] * (nrm[k] @ c + axis)
         lam = 1e-3 * max(np.trace(A), 1e-9)
         c = np.linalg.solve(A + lam * np.eye(2), b + lam * c)
+    if np.hypot(*(c - center)) > 8.0:      # initial_lanes keeps the center (init.BOX_M)
+        if iters > 1:                       # ... and the lanes its first pass read
+            params = initial_lanes_reference(obs, center, angles, lane_width, max_lanes, gap_max,
+                                             traffic_side, 1, width_range)[1]
+        c = np.asarray(center, float).copy()
     return c, params
 
 

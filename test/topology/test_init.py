@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from intersection_estimator.topology.init import (initial_arm_angles, initial_center,
-                                                  initial_lanes, seed_lines)
+from intersection_estimator.topology.init import (BOX_M, initial_arm_angles, initial_center,
+                                                  initial_lanes, lane_guess, seed_lines)
+from intersection_estimator.topology.likelihood import ObservationSet
 from intersection_estimator.topology.preprocess import preprocess
 from reference.init import initial_center_reference, initial_lanes_reference
 
@@ -37,6 +38,38 @@ def test_initial_lanes_recover_lane_counts():
                               width_range=(2.75, 4.0))
     assert np.hypot(*(c - gt.center)) < 0.5
     assert [(p[1], p[2]) for p in params] == [(a.lanes_in, a.lanes_out) for a in gt.arms]
+
+
+def _road_parts(angle_deg: float, lateral: float, n: int = 6) -> ObservationSet:
+    """Trajectory parts of one arm: entering and leaving, one lane each, 20-60 m out,
+    the arm's axis shifted ``lateral`` metres to its left."""
+    u = np.array([math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))])
+    nrm = np.array([-u[1], u[0]])
+    s = np.linspace(20.0, 60.0, n)
+    ent = s[:, None] * u + (lateral - 1.75) * nrm        # right-hand traffic: entering on the right
+    lea = s[:, None] * u + (lateral + 1.75) * nrm
+    xy = np.vstack([ent, lea])
+    h = np.vstack([np.tile(-u, (n, 1)), np.tile(u, (n, 1))])
+    m = 2 * n
+    return ObservationSet(x=xy[:, 0], y=xy[:, 1], hx=h[:, 0], hy=h[:, 1], has_o=np.ones(m, bool),
+                          d=np.r_[np.ones(n), -np.ones(n)], w=np.ones(m), sigma=np.full(m, 0.8),
+                          sigma_ang=np.full(m, 0.1))
+
+
+def test_the_center_stays_where_the_arms_axes_meet_outside_the_box():
+    """Two arms of one road, 8 deg from collinear, one offset by 4 m: their axes meet
+    ~29 m away. That is no refinement of the driving lines' center (init.BOX_M); an
+    ordinary 4-arm scene 2 m off still moves to its center (previous test)."""
+    a, b = _road_parts(0.0, 0.0), _road_parts(172.0, 4.0)
+    obs = ObservationSet(**{f: np.concatenate([getattr(a, f), getattr(b, f)])
+                            for f in ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w', 'sigma', 'sigma_ang')})
+    angles = [0.0, math.radians(172.0)]
+    c, params = initial_lanes(obs, np.zeros(2), angles, 3.5, 6, 4.0)
+    assert np.array_equal(c, np.zeros(2))
+    assert [(p[1], p[2]) for p in params] == [(1, 1), (1, 1)]
+    cx, cy, _ = lane_guess(obs.x, obs.y, obs.hx, obs.hy, obs.has_o, obs.d, obs.w, 0.0, 0.0,
+                           np.array(angles), 3.5, 6, 4.0, 1.0, 3, 3.5, 3.5, False)
+    assert math.hypot(cx, cy) > 3 * BOX_M           # the axes' meeting point itself: far out
 
 
 @pytest.mark.parametrize('mode', ['raw', 'tracked', 'heading'])
