@@ -19,7 +19,7 @@ Online, scans arrive in receive order, not stamp order: several radars on one ve
 reach the node with different latencies (a corner radar's scan stamped before the front
 radar's last one arrives after it). A filter can only go forward in time, so scans are held
 ``reorder_s`` of stamp time (:meth:`RadarTracker.feed`) and tracked in stamp order, scans
-of one stamp as one; a scan older than the last one tracked is late: counted
+of one stamp as one; a scan not newer than the last one tracked is late: counted
 (:attr:`RadarTracker.scans_late`) and left out.
 """
 
@@ -107,8 +107,9 @@ class RadarTracker:
 
     def step(self, t: float, xy: np.ndarray, doppler: np.ndarray, sensor_xy: np.ndarray) -> Detections:
         """One scan of filtered radar rows at stamp ``t``; returns the tracked rows handed
-        out now (online). A scan older than the last is late: counted and ignored."""
-        if self.t is not None and t < self.t:
+        out now (online). A scan not newer than the last is late (scans of one stamp are
+        one scan): counted and ignored."""
+        if self.t is not None and t <= self.t:
             self.scans_late += 1
             return Detections.empty()
         dt = 0.0 if self.t is None else t - self.t
@@ -145,7 +146,7 @@ class RadarTracker:
         d = d.subset(np.argsort(d.t, kind='stable'))
         ts, starts = np.unique(d.t, return_index=True)
         for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
-            if self.t is not None and t < self.t:
+            if self.t is not None and t <= self.t:
                 self.scans_late += 1                  # its stamp is already behind the tracks
                 continue
             self._held.setdefault(float(t), []).append((d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b]))

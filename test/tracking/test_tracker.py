@@ -83,6 +83,8 @@ def test_an_older_scan_is_counted_and_ignored():
     tracker.step(1.0, np.zeros((1, 2)), np.zeros(1), np.zeros((1, 2)))
     out = tracker.step(0.5, np.ones((3, 2)), np.zeros(3), np.zeros((3, 2)))
     assert len(out) == 0 and tracker.scans_late == 1 and len(tracker.live) == 1
+    tracker.step(1.0, np.ones((2, 2)), np.zeros(2), np.zeros((2, 2)))   # its stamp was tracked
+    assert tracker.scans_late == 2 and len(tracker.live) == 1
 
 
 def _two_radars_in_arrival_order(dets, latency_b: float):
