@@ -80,6 +80,7 @@ class Ingest:
         self.values = values
         self.opts = AdapterOptions(doppler_field=values['doppler_field'] or None,
                                    doppler_sign=float(values['doppler_sign']),
+                                   doppler_ego_compensated=bool(values['doppler_ego_compensated']),
                                    min_existence=float(values['min_existence_probability']),
                                    mounts=TfMounts(self.tf, 'base_link', P.mounts(values)),
                                    max_points=int(values['max_observations']))

@@ -55,6 +55,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('doppler_field', '', "Doppler field name; '' = first of doppler, velocity, radial_velocity, v_r"),
     ParamSpec('doppler_sign', 1, '+1: positive Doppler = moving away from the sensor; -1: the opposite',
               choices=(1, -1)),
+    ParamSpec('doppler_ego_compensated', True, 'true: the radar driver removed the ego motion from the '
+              'Doppler (over ground); false: the Doppler is relative to the moving sensor and the node '
+              'removes the ego motion with the odometry'),
     ParamSpec('min_existence_probability', 0.3, 'tracked objects below this are ignored', 0.0, 1.0),
     ParamSpec('weak_labels', [6, 7], 'classification labels (Autoware ids) of tracked road users that '
               'count as traffic of an arm but neither ask for a lane of their own nor shape the lane '

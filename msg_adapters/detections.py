@@ -25,7 +25,7 @@ from .pose_array import read_pose_array
 from .radar_scan import read_radar_scan
 from .tracked_objects import MIN_SPEED_FOR_HEADING, read_objects
 
-__all__ = ['VEHICLE_LABELS', 'AdapterOptions', 'message_kind', 'radar_detections',
+__all__ = ['VEHICLE_LABELS', 'AdapterOptions', 'message_kind', 'radar_detections', 'over_ground',
            'pose_array_detections', 'object_detections', 'to_detections']
 
 #: Autoware labels kept by default: UNKNOWN, CAR, TRUCK, BUS, TRAILER, MOTORCYCLE.
@@ -38,6 +38,9 @@ class AdapterOptions:
 
     doppler_field / rcs_field: name(s) to look up, None = the common names;
     doppler_sign: +1 if the driver's positive Doppler means moving away, -1 otherwise;
+    doppler_ego_compensated: True if the driver removed the ego motion from the Doppler
+    (over ground), False if it is relative to the moving sensor (the adapter then adds the
+    sensor's own velocity along each line of sight, from the ego poses);
     min_existence: objects below this existence probability are dropped;
     labels: Autoware label ids to keep (None = all); mounts: ``{frame: (x, y, yaw)}`` of
     sensors in the ego frame; max_points: larger clouds are refused ('too_large').
@@ -45,6 +48,7 @@ class AdapterOptions:
 
     doppler_field: str | tuple | None = None
     doppler_sign: float = 1.0
+    doppler_ego_compensated: bool = True
     rcs_field: str | tuple | None = None
     min_existence: float = 0.0
     labels: frozenset | None = VEHICLE_LABELS
@@ -84,13 +88,27 @@ def _counted(dets: Detections, dropped: int) -> Detections:
     return dets
 
 
+def over_ground(doppler: np.ndarray, xy: np.ndarray, sensor_xy, sensor_v) -> np.ndarray:
+    """Doppler relative to a sensor at ``sensor_xy`` moving with ``sensor_v`` (fixed frame)
+    -> over ground: a range rate is ``(v_target - v_sensor) . los`` (``los`` the unit vector
+    sensor -> point), so ``v_target . los = doppler + v_sensor . los``."""
+    los = xy - np.asarray(sensor_xy, float)[None]
+    los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
+    return doppler + los @ np.asarray(sensor_v, float)
+
+
 def _radar(cloud: RadarCloud, ego: EgoPoseBuffer, opts: AdapterOptions) -> Detections:
     if len(cloud) == 0:
         return _counted(Detections.empty(), cloud.dropped)
     tf = ego.transform(cloud.frame_id, cloud.stamp, opts.mounts)
-    return _counted(Detections.make(apply(tf, cloud.xyz[:, :2]), cloud.stamp, doppler=cloud.doppler,
-                                    rcs=cloud.rcs, sensor_xy=_origin(ego, cloud.frame_id, cloud.stamp,
-                                                                     tf, opts.mounts)), cloud.dropped)
+    xy = apply(tf, cloud.xyz[:, :2])
+    origin = _origin(ego, cloud.frame_id, cloud.stamp, tf, opts.mounts)
+    doppler = cloud.doppler
+    if not opts.doppler_ego_compensated:
+        frame = cloud.frame_id if cloud.frame_id != ego.fixed_frame else ego.base_frame
+        doppler = over_ground(doppler, xy, origin, ego.velocity(frame, cloud.stamp, opts.mounts))
+    return _counted(Detections.make(xy, cloud.stamp, doppler=doppler, rcs=cloud.rcs, sensor_xy=origin),
+                    cloud.dropped)
 
 
 @guarded

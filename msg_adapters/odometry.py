@@ -182,6 +182,21 @@ class EgoPoseBuffer:
         c, s = math.cos(eyaw), math.sin(eyaw)
         return ex + c * mx - s * my, ey + s * mx + c * my, _wrap(eyaw + myaw)
 
+    def velocity(self, frame_id: str, stamp: float, mounts=None, h: float = 0.05) -> np.ndarray:
+        """Velocity (vx, vy) of the origin of ``frame_id`` in the fixed frame at ``stamp``
+        [m/s]: the central difference of :meth:`transform` over +-``h`` within the poses (a
+        mounted sensor's lever arm on a turning ego included; the odometry's twist is not
+        needed). Beyond the newest pose the twist extrapolates, as in :meth:`pose_at`."""
+        if not self._t:
+            raise AdapterError('no_ego_pose', 'no odometry received yet')
+        a = max(stamp - h, self._t[0])
+        b = min(stamp + h, max(self._t[-1], stamp))
+        if b - a < 1e-3:                  # one pose: its twist
+            a, b = stamp, stamp + h
+        pa = self.transform(frame_id, a, mounts)
+        pb = self.transform(frame_id, b, mounts)
+        return np.array([(pb[0] - pa[0]) / (b - a), (pb[1] - pa[1]) / (b - a)])
+
     def to_fixed(self, frame_id: str, stamp: float, xy, mounts=None) -> np.ndarray:
         """Points (N, 2) in ``frame_id`` at ``stamp`` -> fixed frame (N, 2)."""
         return apply(self.transform(frame_id, stamp, mounts), xy)

@@ -67,6 +67,18 @@ def _tf_static(types, t: float, parent: str, child: str, mount) -> object:
     return g('tf2_msgs/msg/TFMessage')(transforms=[ts])
 
 
+def _sensor_relative(d, ego, i: int, mount, rate) -> np.ndarray:
+    """The simulator's Doppler (over ground) as a sensor on the moving ego measures it:
+    minus the sensor's velocity (the ego's along its heading plus the mount's lever arm
+    turning with it) along each line of sight."""
+    c, s = math.cos(ego.yaw[i]), math.sin(ego.yaw[i])
+    arm = np.array([c * mount[0] - s * mount[1], s * mount[0] + c * mount[1]])
+    v = ego.speed[i] * np.array([c, s]) + rate[i] * np.array([-arm[1], arm[0]])
+    los = d.xy - (ego.xy[i] + arm)[None]
+    los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
+    return d.doppler - los @ v
+
+
 def _yaw_rate(t, yaw):
     if len(t) < 2:
         return np.zeros(len(t))
@@ -86,12 +98,15 @@ class ScenarioBagInfo:
 
 
 def scenario_messages(scenario, types, sensors=('tracked', 'raw', 'heading'), autoware: bool = True,
-                      t0: float = BAG_T0, mount=None) -> Iterator[tuple[float, str, object]]:
+                      t0: float = BAG_T0, mount=None,
+                      doppler_over_ground: bool = True) -> Iterator[tuple[float, str, object]]:
     """``(t, topic, msg)`` of a simulated scenario in time order, messages built with ``types``.
 
     What :func:`write_scenario_bag` records (see there), also usable without a bag (soak,
     DDS tests with ``RclpyTypes``; there ``/tf_static`` is left out when ``tf2_msgs`` is not
-    importable). ``mount`` defaults to :func:`scenario_mount`.
+    importable). ``mount`` defaults to :func:`scenario_mount`. ``doppler_over_ground``
+    False writes the radar's Doppler relative to the moving sensor, as radars without
+    ego-motion compensation report it (:func:`_sensor_relative`).
     """
     from msg_adapters.odometry import odometry_msg
     from msg_adapters.pointcloud2 import radar_cloud_msg
@@ -118,9 +133,10 @@ def scenario_messages(scenario, types, sensors=('tracked', 'raw', 'heading'), au
             stamp, d = next(it)
             ts = t0 + stamp
             if s == 'raw':
+                dop = d.doppler if doppler_over_ground else _sensor_relative(d, ego, i, mount, rate)
                 yield ts, SCENARIO_TOPICS['radar'], radar_cloud_msg(
                     types, make_header(types, radar, ts),
-                    _to_sensor(d.xy, (ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i]), mount), d.doppler, d.rcs)
+                    _to_sensor(d.xy, (ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i]), mount), dop, d.rcs)
             elif s == 'tracked':
                 args = (make_header(types, fx, ts), d.track_id, d.xy, d.heading, d.speed, d.label)
                 yield ts, SCENARIO_TOPICS['objects'], tracked_object_array_msg(types, *args)
