@@ -58,8 +58,9 @@ def _road_parts(angle_deg: float, lateral: float, n: int = 6) -> ObservationSet:
 
 def test_the_center_stays_where_the_arms_axes_meet_outside_the_box():
     """Two arms of one road, 8 deg from collinear, one offset by 4 m: their axes meet
-    ~29 m away. That is no refinement of the driving lines' center (init.BOX_M); an
-    ordinary 4-arm scene 2 m off still moves to its center (previous test)."""
+    ~29 m away. That is no refinement of the driving lines' center (init.BOX_M, windows
+    with trajectories); an ordinary 4-arm scene 2 m off still moves to its center
+    (previous test)."""
     a, b = _road_parts(0.0, 0.0), _road_parts(172.0, 4.0)
     obs = ObservationSet(**{f: np.concatenate([getattr(a, f), getattr(b, f)])
                             for f in ('x', 'y', 'hx', 'hy', 'has_o', 'd', 'w', 'sigma', 'sigma_ang')})
@@ -70,6 +71,8 @@ def test_the_center_stays_where_the_arms_axes_meet_outside_the_box():
     cx, cy, _ = lane_guess(obs.x, obs.y, obs.hx, obs.hy, obs.has_o, obs.d, obs.w, 0.0, 0.0,
                            np.array(angles), 3.5, 6, 4.0, 1.0, 3, 3.5, 3.5, False)
     assert math.hypot(cx, cy) > 3 * BOX_M           # the axes' meeting point itself: far out
+    far, _ = initial_lanes(obs, np.zeros(2), angles, 3.5, 6, 4.0, max_move=math.inf)
+    np.testing.assert_allclose(far, (cx, cy))      # voxel windows (no trajectories) keep it
 
 
 @pytest.mark.parametrize('mode', ['raw', 'tracked', 'heading'])
