@@ -69,6 +69,7 @@ class Ingest:
         self._pending: deque = deque(maxlen=PENDING_MAX)
         self._pending_points = 0
         self.latest_stamp: float | None = None
+        self._late_seen = 0                        # the estimator's late radar scans counted so far
         self._jumps, self._jump_to = 0, None       # time jump: count of consistent stamps, last one
         self._ego_jumps: list[EgoPose] = []        # ego jump candidates, consistent among themselves
         self.tf = TfBuffer()                       # /tf, /tf_static: mounts and map -> odom
@@ -134,22 +135,27 @@ class Ingest:
         """Add to the window; counts rows it refused (non-finite) and the observations that
         gave way to the max_observations cap (a burst degrades to dropping, counted)."""
         before = getattr(estimator, 'evicted', 0)
-        late = getattr(estimator, 'radar_scans_late', 0)
         added = estimator.add(dets)
         if len(dets) > added:
             self.dropped['non_finite'] += len(dets) - added
-        late = getattr(estimator, 'radar_scans_late', 0) - late
-        if late:
-            self.dropped['radar_scan_late'] += late
-            self.warn('radar_scan_late', f'{late} radar scan(s) came more than radar_track_reorder_s='
-                      f'{self.values["radar_track_reorder_s"]:g} s after a newer one: left out of the radar '
-                      'tracks (radars with different latencies need a larger radar_track_reorder_s)')
+        self.count_late(estimator)
         pushed = getattr(estimator, 'evicted', 0) - before
         if pushed:
             self.dropped['window_full'] += pushed
             self.warn('window_full', f'max_observations={self.values["max_observations"]} reached: '
                       f'{pushed} older observation(s) gave way')
         return added
+
+    def count_late(self, estimator) -> None:
+        """Count the radar scans the estimator's tracker found late since the last call
+        (its tracker runs in the tick, so they are counted as they are found)."""
+        total = getattr(estimator, 'radar_scans_late', 0)
+        late, self._late_seen = total - self._late_seen, total
+        if late > 0:
+            self.dropped['radar_scan_late'] += late
+            self.warn('radar_scan_late', f'{late} radar scan(s) came more than radar_track_reorder_s='
+                      f'{self.values["radar_track_reorder_s"]:g} s after a newer one: left out of the radar '
+                      'tracks (radars with different latencies need a larger radar_track_reorder_s)')
 
     def handle_tf(self, msg, static: bool) -> int:
         """A ``tf2_msgs/TFMessage`` from ``/tf`` (``static`` False) or ``/tf_static``: sensor
@@ -376,4 +382,6 @@ def tick(ingest: Ingest, estimator, *, wall_budget: bool, log=None, budget_s: fl
             log('ego passed the intersection: starting on the next one')
         estimator.reset()
         ingest.forget_before(now)
-    return estimator.tick(now, wall_budget=wall_budget, budget_s=budget_s)
+    result = estimator.tick(now, wall_budget=wall_budget, budget_s=budget_s)
+    ingest.count_late(estimator)       # the radar tracker runs in the tick
+    return result

@@ -246,10 +246,13 @@ class OnlineEstimator:
         self._seed = seed
         self._resets = 0
         self._lock = threading.Lock()   # add() may run in another thread than tick()
+        self._track_lock = threading.Lock()   # one feed of the radar tracker at a time
         self.evicted = 0                # observations the max_observations cap pushed out, ever
         # radar rows -> tracks as they arrive; kept over resets (the vehicles drive on)
         self._tracker = RadarTracker(self.config.radar_tracking) if self.config.radar_tracking.enabled else None
         self._clutter_cfg = self.config.topology.preprocess_config()
+        self._radar_queue: list[Detections] = []   # radar rows not yet through the tracker
+        self._queued = 0
         self.reset()
 
     def reset(self) -> None:
@@ -293,7 +296,8 @@ class OnlineEstimator:
 
     def window(self) -> Detections:
         """The observations currently in the window, as the estimators read them
-        (:meth:`_estimated`)."""
+        (:meth:`_estimated`; queued radar rows tracked first)."""
+        self.track_queued()
         with self._lock:
             return self._estimated(Detections.concat(self._parts))
 
@@ -303,32 +307,51 @@ class OnlineEstimator:
         The window never holds more than ``max_observations``, not even between ticks: the
         oldest observations (in arrival order) give way to new ones, and a message larger
         than the cap keeps its newest rows. What gave way is counted in :attr:`evicted`.
-        With the radar tracker on, the rows it hands out for the radar rows join them
-        (:meth:`_radar_tracks`, :meth:`_estimated`); the count returned is of the rows that came.
+        With the radar tracker on, the radar rows are queued for it (:meth:`track_queued`,
+        at the next tick: the node's input callbacks stay short, and the tracker's time is
+        the tick's, inside its budget); more than ``max_observations`` queued rows are
+        tracked at once. The count returned is of the rows that came.
         """
         dets = dets.finite()
         came = len(dets)
-        if self._tracker is not None and came:
-            dets = Detections.concat([dets, self._radar_tracks(dets)])
-        n = len(dets)
-        if n:
-            with self._lock:
-                self._make_room(n)
-                self._parts.append(dets if n <= self.config.max_observations
-                                   else dets.subset(_newest(dets.t, self.config.max_observations)))
-                self._n += len(self._parts[-1])
-                self.evicted += n - len(self._parts[-1])
-                self._dirty = True
+        if came:
+            self._append(dets)
+            if self._tracker is not None and radar_rows_of(dets).any():
+                with self._lock:
+                    self._radar_queue.append(dets.subset(radar_rows_of(dets)))
+                    self._queued += len(self._radar_queue[-1])
+                    full = self._queued > self.config.max_observations
+                if full:
+                    self.track_queued()
         return came
 
-    def _radar_tracks(self, dets: Detections) -> Detections:
-        """The rows the tracker hands out for the radar rows of ``dets`` (one scan per
-        stamp, in stamp order; rows the clutter filter drops are no scan's)."""
-        if not radar_rows_of(dets).any():
-            return Detections.empty()
-        keep = radar_filter(dets, self._clutter_cfg, moving_only=False)
+    def _append(self, dets: Detections) -> None:
+        """``dets`` into the window under the cap (module docstring of :meth:`add`)."""
+        n = len(dets)
         with self._lock:
-            return self._tracker.feed(dets, keep)
+            self._make_room(n)
+            self._parts.append(dets if n <= self.config.max_observations
+                               else dets.subset(_newest(dets.t, self.config.max_observations)))
+            self._n += len(self._parts[-1])
+            self.evicted += n - len(self._parts[-1])
+            self._dirty = True
+
+    def track_queued(self) -> int:
+        """Feed the queued radar rows to the tracker (one scan per stamp; rows the clutter
+        filter drops are no scan's) and add the rows it hands out to the window; returns
+        their count. Called by :meth:`tick` and :meth:`window`."""
+        if self._tracker is None:
+            return 0
+        with self._lock:
+            queue, self._radar_queue, self._queued = self._radar_queue, [], 0
+        if not queue:
+            return 0
+        dets = Detections.concat(queue)
+        with self._track_lock:
+            tracks = self._tracker.feed(dets, radar_filter(dets, self._clutter_cfg, moving_only=False))
+        if len(tracks):
+            self._append(tracks)
+        return len(tracks)
 
     @staticmethod
     def _estimated(dets: Detections) -> Detections:
@@ -413,6 +436,7 @@ class OnlineEstimator:
         t0 = time.perf_counter()
         total = cfg.budget_s if budget_s is None else budget_s
         deadline = t0 + total
+        self.track_queued()
         topo_end = t0 + total * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)
         with self._lock:
             dirty, self._dirty = self._dirty, False

@@ -11,10 +11,12 @@ ground truth's number of arms. DDS stays on this host with its own domain id.
     .venv/bin/python scripts/measure_node.py bags/tracked [--rate 1.0] [--json out.json]
     .venv/bin/python scripts/measure_node.py --sumo 121      # a SUMO family case as the bag
     .venv/bin/python scripts/measure_node.py --sumo 121 --prior-map   # ... and its map as prior_map
+    .venv/bin/python scripts/measure_node.py --sumo 121 --sensor raw  # ... as a radar bag (the radar tracker)
 
 ``--sumo SEED`` writes that case of the SUMO family (issue 15: a real junction's size, e.g.
 seed 121: 6 arms, 34 lanelets, 28.6k tracked rows over 41 s) as a tracked-objects bag with
-its ground truth into a temporary folder and measures on it.
+its ground truth into a temporary folder and measures on it; ``--sensor raw`` writes its
+radar (PointCloud2 with Doppler) instead of the tracked objects.
 """
 
 from __future__ import annotations
@@ -152,9 +154,10 @@ def _summary(diags, topos, t_play, n_arms, rate) -> dict:
     return out
 
 
-def _sumo_bag(seed: int, folder: Path) -> str:
-    """Write SUMO family case ``seed`` as a tracked bag + ``<bag>.gt.json`` and its ground
-    truth as a Lanelet2 map ``<bag>.osm`` (a prior map for ``--prior-map``) in ``folder``."""
+def _sumo_bag(seed: int, folder: Path, sensor: str = 'tracked') -> str:
+    """Write SUMO family case ``seed`` as a bag of ``sensor`` ('tracked' objects or 'raw'
+    radar) + ``<bag>.gt.json`` and its ground truth as a Lanelet2 map ``<bag>.osm`` (a prior
+    map for ``--prior-map``) in ``folder``."""
     sys.path.insert(0, str(ROOT))
     from intersection_estimator.bagio.scenario import write_scenario_bag
     from intersection_estimator.bench import BenchOptions, make_case
@@ -163,7 +166,7 @@ def _sumo_bag(seed: int, folder: Path) -> str:
     from intersection_estimator.scenarios.sumo_gt import snap_connectors
     sc, gt = make_case(BenchOptions(n=1, seed=0, mode='tracked', family='sumo'), seed)
     bag = folder / f'sumo_{seed}'
-    write_scenario_bag(sc, bag, sensors=('tracked',))
+    write_scenario_bag(sc, bag, sensors=(sensor,))
     Path(str(bag) + '.gt.json').write_text(dumps(gt))
     snap_connectors(sc.gt_lanelets)
     write_osm(str(bag) + '.osm', sc.gt_lanelets)
@@ -176,6 +179,8 @@ def main(argv=None) -> int:
     ap.add_argument('--sumo', type=int, metavar='SEED', help='measure on this SUMO family case')
     ap.add_argument('--prior-map', action='store_true',
                     help='with --sumo: the case\'s ground truth as the node\'s prior_map (map changes live)')
+    ap.add_argument('--sensor', choices=('tracked', 'raw'), default='tracked',
+                    help='with --sumo: the bag carries tracked objects or radar (raw)')
     ap.add_argument('--rate', type=float, default=1.0)
     ap.add_argument('--json')
     args = ap.parse_args(argv)
@@ -185,7 +190,7 @@ def main(argv=None) -> int:
         ap.error('--prior-map needs --sumo SEED (the case\'s ground truth is the map)')
     if args.sumo is not None:
         tmp = tempfile.TemporaryDirectory(prefix='ie_measure_sumo_')
-        args.bag = _sumo_bag(args.sumo, Path(tmp.name))
+        args.bag = _sumo_bag(args.sumo, Path(tmp.name), args.sensor)
     if not Path(args.bag).exists():
         print(f'measure_node: no such bag: {args.bag}', file=sys.stderr)
         return 1
