@@ -248,7 +248,7 @@ class OnlineEstimator:
         self._lock = threading.Lock()   # add() may run in another thread than tick()
         self._track_lock = threading.Lock()   # one feed of the radar tracker at a time
         self.evicted = 0                # observations the max_observations cap pushed out, ever
-        # radar rows -> tracks as they arrive; kept over resets (the vehicles drive on)
+        # radar rows -> tracks, at each tick (track_queued); kept over resets (the vehicles drive on)
         self._tracker = RadarTracker(self.config.radar_tracking) if self.config.radar_tracking.enabled else None
         self._clutter_cfg = self.config.topology.preprocess_config()
         self._radar_queue: list[Detections] = []   # radar rows not yet through the tracker
