@@ -342,16 +342,16 @@ class OnlineEstimator:
         their count. Called by :meth:`tick` and :meth:`window`."""
         if self._tracker is None:
             return 0
-        with self._lock:
-            queue, self._radar_queue, self._queued = self._radar_queue, [], 0
-        if not queue:
-            return 0
-        dets = Detections.concat(queue)
-        with self._track_lock:
+        with self._track_lock:          # batches reach the tracker in the order they were queued
+            with self._lock:
+                queue, self._radar_queue, self._queued = self._radar_queue, [], 0
+            if not queue:
+                return 0
+            dets = Detections.concat(queue)
             tracks = self._tracker.feed(dets, radar_filter(dets, self._clutter_cfg, moving_only=False))
-        if len(tracks):
-            self._append(tracks)
-        return len(tracks)
+            if len(tracks):
+                self._append(tracks)
+            return len(tracks)
 
     @staticmethod
     def _estimated(dets: Detections) -> Detections:

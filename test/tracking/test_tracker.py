@@ -161,6 +161,25 @@ def test_the_online_estimator_windows_radar_as_tracks():
     assert len(off.window()) == len(dets)
 
 
+def test_the_input_path_only_queues_the_tracker_runs_in_the_tick():
+    """``add`` (the node's input callback) queues radar rows; the tracker runs when the tick
+    (or ``window``) asks, on every queued scan in stamp order; a queue beyond the window's
+    cap is tracked at once (memory stays bounded without ticks)."""
+    dets, _ = _crossing(np.random.default_rng(6))
+    est = OnlineEstimator(PipelineConfig(topology_samples=100, lanes_enabled=False))
+    for t in np.unique(dets.t)[::-1]:                 # even in reverse arrival order
+        est.add(dets.subset(dets.t == t))
+    assert not (Detections.concat(est._parts).track_id >= RADAR_TRACK_ID0).any()
+    est.tick(float(dets.t.max()))
+    assert (Detections.concat(est._parts).track_id >= RADAR_TRACK_ID0).any()
+    assert est.radar_scans_late == 0 and not est._radar_queue
+    small = OnlineEstimator(PipelineConfig(topology_samples=100, lanes_enabled=False,
+                                           max_observations=200))
+    for t in np.unique(dets.t):
+        small.add(dets.subset(dets.t == t))
+        assert small._queued <= 200 + int((dets.t == t).sum())
+
+
 def test_with_tracked_objects_of_its_own_the_window_keeps_radar_rows_not_radar_tracks():
     dets, (east, _) = _crossing(np.random.default_rng(7))
     ts = np.unique(dets.t)
