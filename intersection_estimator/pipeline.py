@@ -316,9 +316,10 @@ class OnlineEstimator:
         came = len(dets)
         if came:
             self._append(dets)
-            if self._tracker is not None and radar_rows_of(dets).any():
+            radar = radar_rows_of(dets) if self._tracker is not None else None
+            if radar is not None and radar.any():
                 with self._lock:
-                    self._radar_queue.append(dets.subset(radar_rows_of(dets)))
+                    self._radar_queue.append(dets.subset(radar))
                     self._queued += len(self._radar_queue[-1])
                     full = self._queued > self.config.max_observations
                 if full:

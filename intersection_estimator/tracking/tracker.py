@@ -146,9 +146,7 @@ class RadarTracker:
         d = d.subset(np.argsort(d.t, kind='stable'))
         ts, starts = np.unique(d.t, return_index=True)
         for t, a, b in zip(ts, starts, np.r_[starts[1:], len(d.t)]):
-            if self.t is not None and t <= self.t:
-                self.scans_late += 1                  # its stamp is already behind the tracks
-                continue
+            # a scan behind the tracks sorts first and is counted late by step()
             self._held.setdefault(float(t), []).append((d.xy[a:b], d.doppler[a:b], d.sensor_xy[a:b]))
         held = sorted(self._held)
         if self.keep_history or not held:
