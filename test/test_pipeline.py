@@ -116,3 +116,39 @@ def test_topology_stops_early_when_the_lane_initialisation_is_due(scenario):
     # a due lane run without initialisation does not stop the topology either
     assert est._lane_step(scenario.gt, dets, now=9.0) == 'run'
     assert est._lane_step(None, dets, now=9.0) == 'none'
+
+
+def test_a_lane_reinitialisation_without_room_waits_one_tick(scenario):
+    """Wall mode: when even the least topology share leaves no room for re-initialising
+    the lane course (the node's tick that also publishes the waiting lanelets), the tick is
+    the topology's and the last lanelets stand; the next tick re-initialises regardless.
+    The plan counts the MAP state's report beside the initialisation."""
+    import time
+    from intersection_estimator.pipeline import _topology_key
+    dets = scenario.detections('tracked')
+    est = OnlineEstimator(PipelineConfig(), seed=0)
+    est._topo = topo = _Topo(scenario.gt)
+    est._report_s.append(0.012)
+    est._init_s.append(0.080)
+    assert est._init_cost_s() == pytest.approx(0.092)
+    t0 = time.perf_counter()
+    topo_end, no_room = t0 + 60.0, t0 - 1.0
+    est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
+    assert not est._defer          # the first initialisation never waits
+    est._lanes.initialise(scenario.gt, dets)
+    est._lane_key, est._lane_t = ('stale',) + _topology_key(scenario.gt)[1:], 0.0   # new data since
+    before = est._lanes.lanelets
+    topo.budgets.clear()
+    est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
+    assert est._lane_step(scenario.gt, dets, 5.0) == 'defer'
+    assert len(topo.budgets) == 1 and topo.budgets[0] > 30.0      # the topology keeps the tick
+    kept = est._tick_lanes(scenario.gt, dets, 5.0, None, 0.15)
+    assert not est._lanes_updated and [l.id for l in kept] == [l.id for l in before]
+    topo.budgets.clear()
+    est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)   # the next tick: no wait
+    assert est._lane_step(scenario.gt, dets, 5.0) == 'initialise'
+    assert topo.budgets[0] <= 0.15
+    # with room the re-initialisation never waits
+    est._deferred = False
+    est._topology_phase(dets, False, 5.0, topo_end, t0 + 20.0, 0.15)
+    assert est._lane_step(scenario.gt, dets, 5.0) == 'initialise'
