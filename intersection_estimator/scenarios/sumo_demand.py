@@ -19,7 +19,11 @@ import numpy as np
 
 from .sumo_config import SumoConfig
 
-__all__ = ['sources_sinks', 'write_routes', 'through_pairs', 'EGO_ID']
+__all__ = ['sources_sinks', 'write_routes', 'through_pairs', 'EGO_ID', 'VTYPE_LENGTH']
+
+#: Length [m] of each vehicle type the routes use (SUMO's defaults for passenger cars and
+#: bicycles, written out so that ``read_fcd`` finds the box center with the same number).
+VTYPE_LENGTH = {'car': 5.0, 'truck': 10.0, 'bike': 1.6, 'egotype': 5.0}
 
 EGO_ID = 'ego'
 
@@ -47,12 +51,13 @@ def sources_sinks(net) -> tuple[list[str], list[str]]:
 
 def _vtypes(cfg: SumoConfig) -> str:
     car = 1.0 - cfg.bicycle_share - cfg.truck_share
+    L = {k: f'{v:g}' for k, v in VTYPE_LENGTH.items()}
     return ('  <vTypeDistribution id="mix">\n'
-            f'    <vType id="car" vClass="passenger" probability="{car:.3f}"/>\n'
-            f'    <vType id="truck" vClass="truck" length="10" probability="{cfg.truck_share:.3f}"/>\n'
-            f'    <vType id="bike" vClass="bicycle" probability="{cfg.bicycle_share:.3f}"/>\n'
+            f'    <vType id="car" vClass="passenger" length="{L["car"]}" probability="{car:.3f}"/>\n'
+            f'    <vType id="truck" vClass="truck" length="{L["truck"]}" probability="{cfg.truck_share:.3f}"/>\n'
+            f'    <vType id="bike" vClass="bicycle" length="{L["bike"]}" probability="{cfg.bicycle_share:.3f}"/>\n'
             '  </vTypeDistribution>\n'
-            '  <vType id="egotype" vClass="passenger"/>\n')
+            f'  <vType id="egotype" vClass="passenger" length="{L["egotype"]}"/>\n')
 
 
 def _flows(rng, net, cfg: SumoConfig, end: float, only=None) -> list[str]:

@@ -6,6 +6,13 @@
 one :class:`FcdTrack` per vehicle / person: times rebased to the window, position,
 yaw (SUMO's angle is clockwise from north, degrees), speed, the lane (vehicles) per
 sample, the vehicle type.
+
+SUMO's position of a vehicle is the middle of its *front bumper*; a perception stack
+reports an object's box center. So each vehicle's position is moved back along its
+heading by half its type's length (``sumo_demand.VTYPE_LENGTH``; SUMO's angle is the
+direction from the back to the front bumper, so this is the middle of that chord).
+Without it the tracks ran exactly on the lane shapes, turns included, and every queue's
+first vehicle stood exactly on the stop line. Persons keep their position.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ import re
 
 import numpy as np
 
+from .sumo_demand import VTYPE_LENGTH
 from .sumo_net import run_tool, sumo_binary
 
 __all__ = ['FcdTrack', 'run_sumo', 'read_fcd']
@@ -77,10 +85,11 @@ def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack
     out = []
     for vid in sorted(rows):
         kind, r = rows[vid]
-        ang = np.array([x[3] for x in r])
+        yaw = np.radians(90.0 - np.array([x[3] for x in r]))
+        xy = np.array([[x[1], x[2]] for x in r]).reshape(-1, 2)
+        xy -= 0.5 * VTYPE_LENGTH.get(kind, 0.0) * np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
         out.append(FcdTrack(id=vid, kind=kind, cycle=np.array([x[0] for x in r], int),
-                            xy=np.array([[x[1], x[2]] for x in r]),
-                            yaw=np.radians(90.0 - ang), speed=np.array([x[4] for x in r]),
+                            xy=xy, yaw=yaw, speed=np.array([x[4] for x in r]),
                             lane=np.array([x[5] for x in r], dtype=object).astype(str)))
     return out
 

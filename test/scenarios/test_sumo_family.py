@@ -102,3 +102,43 @@ def test_road_only_case_shows_a_road(tmp_path):
     m = evaluate(doc, doc)
     assert m['road_case'] and m['arms_true_used'] == 2 and len(sc.gt.arms) >= 3
     assert sc.info['pedestrians'] == 0 and sc.info['vehicles'] > 0
+
+
+def test_fcd_positions_become_box_centers(tmp_path):
+    """SUMO writes a vehicle's front-bumper middle; the family reports its box center (half
+    the type's length back along the heading), as a perception stack would. Persons stay."""
+    from intersection_estimator.scenarios.sumo_demand import VTYPE_LENGTH
+    from intersection_estimator.scenarios.sumo_run import read_fcd
+    fcd = tmp_path / 'fcd.xml'
+    fcd.write_text('<fcd-export>\n<timestep time="30.00">\n'
+                   '<vehicle id="a" x="10.00" y="5.00" angle="90.00" type="car" speed="3.00" lane="e_0"/>\n'
+                   '<vehicle id="b" x="0.00" y="20.00" angle="0.00" type="truck" speed="1.00" lane="f_0"/>\n'
+                   '<person id="p" x="1.00" y="2.00" angle="45.00" speed="1.00"/>\n'
+                   '</timestep>\n</fcd-export>\n')
+    got = {t.id: t for t in read_fcd(fcd, 30.0, 1.0, 0.1)}
+    np.testing.assert_allclose(got['a'].xy[0], [10.0 - 0.5 * VTYPE_LENGTH['car'], 5.0], atol=1e-9)
+    np.testing.assert_allclose(got['b'].xy[0], [0.0, 20.0 - 0.5 * VTYPE_LENGTH['truck']], atol=1e-9)
+    np.testing.assert_allclose(got['p'].xy[0], [1.0, 2.0])
+    assert got['a'].yaw[0] == pytest.approx(0.0) and got['b'].yaw[0] == pytest.approx(math.pi / 2)
+
+
+def test_a_queue_waits_behind_the_stop_line(case):
+    """The first vehicle of a queue stands behind the stop line by about half its length
+    (its box center), not on it."""
+    sc, _ = case
+    d = sc.detections('tracked')
+    still = (d.track_id >= 0) & np.isfinite(d.speed) & (d.speed < 0.2)
+    heads = []
+    for ll in sc.gt_lanelets:
+        if ll.kind != 'entering':
+            continue
+        end, u = ll.center[-1], ll.center[-1] - ll.center[-2]
+        u = u / np.linalg.norm(u)
+        rel = d.xy[still] - end
+        on = np.abs(rel @ np.array([-u[1], u[0]])) < 1.5
+        s = rel[on] @ u
+        s = s[(s > -15.0) & (s < 5.0)]
+        if len(s):
+            heads.append(np.median(np.sort(s)[-20:]))
+    assert heads, 'no queue in the case'
+    assert -4.0 < float(np.median(heads)) < -1.0
