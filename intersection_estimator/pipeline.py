@@ -512,9 +512,9 @@ class OnlineEstimator:
     def _init_cost_s(self) -> float:
         """[s] what a lane update cannot cut short, planned at the longest of its recent
         costs (0 before the first): the report of the topology's MAP state it starts from
-        (support, weak arms) and the lane initialisation with
-        the refinement after its sampler. On a large junction's radar window (SUMO seed
-        121) the report alone is 11-13 ms a tick, which the plan once left out."""
+        (support, weak arms) and the lane initialisation with the refinement after its
+        sampler. On a large junction's radar window (SUMO seed 121) the report alone is
+        11-13 ms a tick, which the plan once left out."""
         return max(self._report_s, default=0.0) + max(self._init_s, default=0.0)
 
     def _lanes_due(self, best, dets: Detections, now: float) -> bool:

@@ -8,11 +8,12 @@ yaw (SUMO's angle is clockwise from north, degrees), speed, the lane (vehicles) 
 sample, the vehicle type.
 
 SUMO's position of a vehicle is the middle of its *front bumper*; a perception stack
-reports an object's box center. So each vehicle's position is moved back along its
-heading by half its type's length (``sumo_demand.VTYPE_LENGTH``; SUMO's angle is the
-direction from the back to the front bumper, so this is the middle of that chord).
-Without it the tracks ran exactly on the lane shapes, turns included, and every queue's
-first vehicle stood exactly on the stop line. Persons keep their position.
+reports an object's box center. So each vehicle's position is taken half its type's
+length (``sumo_demand.VTYPE_LENGTH``) back along the path its front bumper drove
+(:func:`box_center`): a driver keeps the car's body, not its bumper, on the lane, so the
+center follows the lane shape as SUMO's point vehicle does, half a car length behind the
+front. Without it every position was 2.5 m (a truck 5 m) ahead of the vehicle's center and
+every queue's first vehicle stood exactly on the stop line. Persons keep their position.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy as np
 from .sumo_demand import VTYPE_LENGTH
 from .sumo_net import run_tool, sumo_binary
 
-__all__ = ['FcdTrack', 'run_sumo', 'read_fcd']
+__all__ = ['FcdTrack', 'run_sumo', 'read_fcd', 'box_center']
 
 
 @dataclass
@@ -87,10 +88,26 @@ def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack
         kind, r = rows[vid]
         yaw = np.radians(90.0 - np.array([x[3] for x in r]))
         xy = np.array([[x[1], x[2]] for x in r]).reshape(-1, 2)
-        xy -= 0.5 * VTYPE_LENGTH.get(kind, 0.0) * np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
+        xy = box_center(xy, yaw, 0.5 * VTYPE_LENGTH.get(kind, 0.0))
         out.append(FcdTrack(id=vid, kind=kind, cycle=np.array([x[0] for x in r], int),
                             xy=xy, yaw=yaw, speed=np.array([x[4] for x in r]),
                             lane=np.array([x[5] for x in r], dtype=object).astype(str)))
+    return out
+
+
+def box_center(front: np.ndarray, yaw: np.ndarray, back: float) -> np.ndarray:
+    """(M, 2) positions ``back`` metres behind the front bumper's positions ``front`` along
+    the path it drove (before the first row: straight back along the first heading)."""
+    if back <= 0.0 or len(front) == 0:
+        return front
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(front, axis=0), axis=1))])
+    at = s - back
+    out = np.empty_like(front)
+    on = at >= 0.0
+    for k in range(2):
+        out[on, k] = np.interp(at[on], s, front[:, k])
+    heading = np.array([math.cos(yaw[0]), math.sin(yaw[0])])
+    out[~on] = front[0] + at[~on, None] * heading
     return out
 
 

@@ -106,7 +106,8 @@ def test_road_only_case_shows_a_road(tmp_path):
 
 def test_fcd_positions_become_box_centers(tmp_path):
     """SUMO writes a vehicle's front-bumper middle; the family reports its box center (half
-    the type's length back along the heading), as a perception stack would. Persons stay."""
+    the type's length back along its path; with one row, along its heading), as a perception
+    stack would. Persons stay."""
     from intersection_estimator.scenarios.sumo_demand import VTYPE_LENGTH
     from intersection_estimator.scenarios.sumo_run import read_fcd
     fcd = tmp_path / 'fcd.xml'
@@ -142,3 +143,18 @@ def test_a_queue_waits_behind_the_stop_line(case):
             heads.append(np.median(np.sort(s)[-20:]))
     assert heads, 'no queue in the case'
     assert -4.0 < float(np.median(heads)) < -1.0
+
+
+def test_box_center_follows_the_path_through_a_turn():
+    """On a turn the center stays on the front bumper's path (a driver keeps the car on the
+    lane), half a length of arc behind; before the first row it is straight behind."""
+    from intersection_estimator.scenarios.sumo_run import box_center
+    a = np.linspace(0.0, math.pi / 2, 200)                 # quarter circle, radius 10 m
+    front = 10.0 * np.stack([np.cos(a), np.sin(a)], axis=1)
+    yaw = a + math.pi / 2
+    c = box_center(front, yaw, 2.5)
+    late = a * 10.0 >= 2.5
+    assert np.allclose(np.hypot(*c[late].T), 10.0, atol=0.01)       # on the path, not the chord
+    np.testing.assert_allclose(np.arctan2(c[late, 1], c[late, 0]) * 10.0, a[late] * 10.0 - 2.5, atol=0.01)
+    np.testing.assert_allclose(c[0], front[0] - 2.5 * np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
+    assert box_center(front, yaw, 0.0) is front
