@@ -12,8 +12,10 @@ reports an object's box center. So each vehicle's position is taken half its typ
 length (``sumo_demand.VTYPE_LENGTH``) back along the path its front bumper drove
 (:func:`box_center`): a driver keeps the car's body, not its bumper, on the lane, so the
 center follows the lane shape as SUMO's point vehicle does, half a car length behind the
-front. Without it every position was 2.5 m (a truck 5 m) ahead of the vehicle's center and
-every queue's first vehicle stood exactly on the stop line. Persons keep their position.
+front; its lane is the one the front was on there (SUMO's angle, the direction from back to
+front bumper, is already the heading at the center). Without it every position was 2.5 m (a
+truck 5 m) ahead of the vehicle's center and every queue's first vehicle stood exactly on
+the stop line. Persons keep their position.
 """
 
 from __future__ import annotations
@@ -88,18 +90,21 @@ def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack
         kind, r = rows[vid]
         yaw = np.radians(90.0 - np.array([x[3] for x in r]))
         xy = np.array([[x[1], x[2]] for x in r]).reshape(-1, 2)
-        xy = box_center(xy, yaw, 0.5 * VTYPE_LENGTH.get(kind, 0.0))
+        xy, at = box_center(xy, yaw, 0.5 * VTYPE_LENGTH.get(kind, 0.0))
         out.append(FcdTrack(id=vid, kind=kind, cycle=np.array([x[0] for x in r], int),
                             xy=xy, yaw=yaw, speed=np.array([x[4] for x in r]),
-                            lane=np.array([x[5] for x in r], dtype=object).astype(str)))
+                            lane=np.array([x[5] for x in r], dtype=object).astype(str)[at]))
     return out
 
 
-def box_center(front: np.ndarray, yaw: np.ndarray, back: float) -> np.ndarray:
-    """(M, 2) positions ``back`` metres behind the front bumper's positions ``front`` along
-    the path it drove (before the first row: straight back along the first heading)."""
+def box_center(front: np.ndarray, yaw: np.ndarray, back: float) -> tuple[np.ndarray, np.ndarray]:
+    """((M, 2) positions, (M,) rows): the positions ``back`` metres behind the front
+    bumper's positions ``front`` along the path it drove (before the first row: straight
+    back along the first heading), and per row the row whose front position the center is
+    passing -- its SUMO lane is the center's lane (0 before the first)."""
+    rows = np.arange(len(front))
     if back <= 0.0 or len(front) == 0:
-        return front
+        return front, rows
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(front, axis=0), axis=1))])
     at = s - back
     out = np.empty_like(front)
@@ -108,7 +113,7 @@ def box_center(front: np.ndarray, yaw: np.ndarray, back: float) -> np.ndarray:
         out[on, k] = np.interp(at[on], s, front[:, k])
     heading = np.array([math.cos(yaw[0]), math.sin(yaw[0])])
     out[~on] = front[0] + at[~on, None] * heading
-    return out
+    return out, np.clip(np.searchsorted(s, at, side='right') - 1, 0, len(front) - 1)
 
 
 def yaw_wrap(a):

@@ -121,6 +121,7 @@ def test_fcd_positions_become_box_centers(tmp_path):
     np.testing.assert_allclose(got['b'].xy[0], [0.0, 20.0 - 0.5 * VTYPE_LENGTH['truck']], atol=1e-9)
     np.testing.assert_allclose(got['p'].xy[0], [1.0, 2.0])
     assert got['a'].yaw[0] == pytest.approx(0.0) and got['b'].yaw[0] == pytest.approx(math.pi / 2)
+    assert got['a'].lane[0] == 'e_0' and got['p'].lane[0] == ''
 
 
 def test_a_queue_waits_behind_the_stop_line(case):
@@ -152,9 +153,11 @@ def test_box_center_follows_the_path_through_a_turn():
     a = np.linspace(0.0, math.pi / 2, 200)                 # quarter circle, radius 10 m
     front = 10.0 * np.stack([np.cos(a), np.sin(a)], axis=1)
     yaw = a + math.pi / 2
-    c = box_center(front, yaw, 2.5)
+    c, rows = box_center(front, yaw, 2.5)
     late = a * 10.0 >= 2.5
     assert np.allclose(np.hypot(*c[late].T), 10.0, atol=0.01)       # on the path, not the chord
     np.testing.assert_allclose(np.arctan2(c[late, 1], c[late, 0]) * 10.0, a[late] * 10.0 - 2.5, atol=0.01)
     np.testing.assert_allclose(c[0], front[0] - 2.5 * np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
-    assert box_center(front, yaw, 0.0) is front
+    # the row the center passes: its front was where the center is now (its lane is the center's)
+    assert np.all(rows[~late] == 0) and np.all(np.linalg.norm(front[rows[late]] - c[late], axis=1) < 0.08)
+    assert box_center(front, yaw, 0.0)[0] is front
