@@ -64,9 +64,13 @@ _OBJ = re.compile(rb'<(vehicle|person) ([^>]*?)/?>')
 _ATTR = re.compile(rb'(\w+)="([^"]*)"')
 
 
-def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack]:
+def read_fcd(path, warmup: float, duration: float, step: float,
+             back: dict | None = None) -> list[FcdTrack]:
     """Tracks in the window (module doc), sorted by id. A line scanner over SUMO's
-    one-element-per-line fcd file (several times faster than an XML tree walk)."""
+    one-element-per-line fcd file (several times faster than an XML tree walk).
+    ``back``: metres behind the front bumper a type's position is taken (default: half
+    its length, the box center; the ego's origin is its rear axle instead)."""
+    back = {k: 0.5 * v for k, v in VTYPE_LENGTH.items()} if back is None else back
     rows: dict = {}
     cyc, inside = 0, False
     with open(path, 'rb') as fh:
@@ -90,7 +94,7 @@ def read_fcd(path, warmup: float, duration: float, step: float) -> list[FcdTrack
         kind, r = rows[vid]
         yaw = np.radians(90.0 - np.array([x[3] for x in r]))
         xy = np.array([[x[1], x[2]] for x in r]).reshape(-1, 2)
-        xy, at = box_center(xy, yaw, 0.5 * VTYPE_LENGTH.get(kind, 0.0))
+        xy, at = box_center(xy, yaw, back.get(kind, 0.0))
         out.append(FcdTrack(id=vid, kind=kind, cycle=np.array([x[0] for x in r], int),
                             xy=xy, yaw=yaw, speed=np.array([x[4] for x in r]),
                             lane=np.array([x[5] for x in r], dtype=object).astype(str)[at]))

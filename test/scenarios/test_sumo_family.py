@@ -161,3 +161,15 @@ def test_box_center_follows_the_path_through_a_turn():
     # the row the center passes: its front was where the center is now (its lane is the center's)
     assert np.all(rows[~late] == 0) and np.all(np.linalg.norm(front[rows[late]] - c[late], axis=1) < 0.08)
     assert box_center(front, yaw, 0.0)[0] is front
+
+
+def test_the_ego_radar_sits_at_its_front_bumper(case):
+    """The ego's origin is its rear axle (base_link), so the radar ``sensor_mount`` ahead of
+    it is where SUMO's ego front bumper is (not a car length ahead of the car)."""
+    from intersection_estimator.scenarios.sumo_demand import EGO_ID
+    from intersection_estimator.scenarios.sumo_run import read_fcd
+    sc, work = case
+    ego = next(t for t in read_fcd(work / 'fcd.xml', GEN.warmup_s, sc.duration, GEN.step_s, back={})
+               if t.id == EGO_ID)
+    radar = sc.ego.sensor_xy(sc.config.sensor_mount)[ego.cycle]
+    assert np.median(np.linalg.norm(radar - ego.xy, axis=1)) < 0.1
