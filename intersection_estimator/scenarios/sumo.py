@@ -31,10 +31,10 @@ from ..sim.traffic import EgoTrajectory, Track
 from .base import FamilyScenario
 from .floor import drove, label_points, traffic_counts, traffic_lines
 from .sumo_config import SumoConfig
-from .sumo_demand import EGO_ID, VTYPE_LENGTH, sources_sinks, write_routes
+from .sumo_demand import EGO_ID, sources_sinks, write_routes
 from .sumo_gt import CLUSTER_M, net_gt, read_net
 from .sumo_net import generate_net, ind_net
-from .sumo_run import read_fcd, run_sumo
+from .sumo_run import CENTER_BACK, read_fcd, run_sumo
 
 __all__ = ['sumo_scenario', 'main_road', 'LABEL_OF']
 
@@ -173,7 +173,7 @@ def sumo_scenario(seed: int, cfg: SumoConfig = SumoConfig(), sim: SimConfig = Si
         # the ego's origin is its rear axle (base_link): the radar, sensor_mount ahead of it,
         # sits at the front bumper; every other vehicle is its box center (sumo_run doc)
         fcd = read_fcd(fcd_path, cfg.warmup_s, duration, cfg.step_s,
-                       back={**{k: 0.5 * v for k, v in VTYPE_LENGTH.items()}, 'egotype': sim.sensor_mount})
+                       back={**CENTER_BACK, 'egotype': sim.sensor_mount})
     rate = 1.0 / cfg.step_s
     n_cyc = int(round(duration * rate)) + 1
     ego = _ego(fcd, n_cyc, rate, ego_ll.center[-1] - 4.0 * (ego_ll.center[-1] - ego_ll.center[-2])

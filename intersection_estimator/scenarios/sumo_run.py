@@ -30,7 +30,10 @@ import numpy as np
 from .sumo_demand import VTYPE_LENGTH
 from .sumo_net import run_tool, sumo_binary
 
-__all__ = ['FcdTrack', 'run_sumo', 'read_fcd', 'box_center']
+__all__ = ['FcdTrack', 'run_sumo', 'read_fcd', 'box_center', 'CENTER_BACK']
+
+#: Metres behind the front bumper where each vehicle type's box center is (half its length).
+CENTER_BACK = {kind: 0.5 * length for kind, length in VTYPE_LENGTH.items()}
 
 
 @dataclass
@@ -70,7 +73,7 @@ def read_fcd(path, warmup: float, duration: float, step: float,
     one-element-per-line fcd file (several times faster than an XML tree walk).
     ``back``: metres behind the front bumper a type's position is taken (default: half
     its length, the box center; the ego's origin is its rear axle instead)."""
-    back = {k: 0.5 * v for k, v in VTYPE_LENGTH.items()} if back is None else back
+    back = CENTER_BACK if back is None else back
     rows: dict = {}
     cyc, inside = 0, False
     with open(path, 'rb') as fh:
