@@ -108,7 +108,7 @@ def test_topology_stops_early_when_the_lane_initialisation_is_due(scenario):
     assert len(topo.budgets) == 1 and topo.budgets[0] <= 20.0 + 1e-6
     # the lane course stands for this topology and is not due before lane_period
     from intersection_estimator.pipeline import _topology_key
-    est._lane_key, est._lane_t = _topology_key(scenario.gt), 4.5
+    est._lane_key, est._lane_topo, est._lane_t = _topology_key(scenario.gt), scenario.gt, 4.5
     assert est._lane_step(scenario.gt, dets, now=5.0) == 'keep'
     topo.budgets.clear()
     est._topology_phase(dets, False, 5.0, topo_end, lanes_start, 0.15)
@@ -137,6 +137,7 @@ def test_a_lane_reinitialisation_without_room_waits_one_tick(scenario):
     assert not est._defer          # the first initialisation never waits
     est._lanes.initialise(scenario.gt, dets)
     est._lane_key, est._lane_t = ('stale',) + _topology_key(scenario.gt)[1:], 0.0   # new data since
+    est._lane_topo = scenario.gt
     before = est._lanes.lanelets
     topo.budgets.clear()
     est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
@@ -152,3 +153,33 @@ def test_a_lane_reinitialisation_without_room_waits_one_tick(scenario):
     est._deferred = False
     est._topology_phase(dets, False, 5.0, topo_end, t0 + 20.0, 0.15)
     assert est._lane_step(scenario.gt, dets, 5.0) == 'initialise'
+
+
+def test_the_lane_course_stands_while_the_topology_stays_within_its_tolerance(scenario):
+    """A MAP state that moves less than 1 m / 3 deg keeps the lane course (no re-initialisation
+    when it merely crosses a grid line); more, another lane count or another arm set does not."""
+    from dataclasses import replace as rep
+    from intersection_estimator.pipeline import same_lanes
+    gt = scenario.gt
+    moved = rep(gt, center=np.asarray(gt.center, float) + [0.6, -0.5],
+                arms=[rep(a, angle=a.angle + np.radians(2.5)) for a in gt.arms])
+    assert same_lanes(moved, gt) and same_lanes(gt, gt)
+    assert not same_lanes(rep(gt, center=np.asarray(gt.center, float) + [1.2, 0.0]), gt)
+    assert not same_lanes(rep(gt, arms=[rep(a, angle=a.angle + np.radians(4.0)) for a in gt.arms]), gt)
+    fewer = [rep(gt.arms[0], lanes_in=gt.arms[0].lanes_in + 1)] + list(gt.arms[1:])
+    assert not same_lanes(rep(gt, arms=fewer), gt)
+    assert not same_lanes(rep(gt, arms=list(gt.arms[1:])), gt) and not same_lanes(gt, None)
+    # an arm near +-180 deg whose angle wraps stays the same arm
+    wrap = rep(gt, arms=[rep(gt.arms[0], angle=np.pi - 0.01)] + list(gt.arms[1:]))
+    wrapped = rep(gt, arms=[rep(gt.arms[0], angle=-np.pi + 0.01)] + list(gt.arms[1:]))
+    assert same_lanes(wrapped, wrap)
+    est = OnlineEstimator(PipelineConfig(), seed=0)
+    dets = scenario.detections('tracked')
+    est._lane_key, est._lane_topo, est._lane_t = ('stale',) + _key(gt)[1:], gt, 4.5
+    assert est._lane_step(moved, dets, now=5.0) == 'keep'        # within the lane period
+    assert est._lane_step(rep(gt, center=np.asarray(gt.center, float) + [3.0, 0.0]), dets, now=5.0) == 'initialise'
+
+
+def _key(t):
+    from intersection_estimator.pipeline import _topology_key
+    return _topology_key(t)
