@@ -18,7 +18,7 @@ import numpy as np
 
 from .convergence import ConvergenceConfig, ConvergenceTracker
 from .lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
-from .model import Intersection, Lanelet, topology_key
+from .model import Intersection, Lanelet
 from .observability import Observability, assess
 from .observations import Detections
 from .ranges import check_table
@@ -268,8 +268,8 @@ class OnlineEstimator:
         self._n = 0
         self._topo = TopologyEstimator(self.config.topology, rng_topo)
         self._lanes = LaneCourseEstimator(self.config.lanes, rng_lanes)
-        self._lane_key = None
         self._lane_topo = None            # the topology the lane course was initialised on
+        self._lane_stale = False          # observations came since that initialisation
         self._lane_t = -np.inf
         self._init_s = deque(maxlen=INIT_COSTS)   # [s] recent lane initialisations + refinements
         self._report_s = deque(maxlen=INIT_COSTS)  # [s] recent reports of the MAP state
@@ -458,7 +458,7 @@ class OnlineEstimator:
         restart = False
         if dirty:
             self._topo.set_observations(dets)
-            self._lane_key = None if self._lane_key is None else ('stale',) + self._lane_key[1:]
+            self._lane_stale = True
             restart = len(dets) >= cfg.restart_growth * self._restart_n
         if not wall_budget:
             if restart:
@@ -477,13 +477,13 @@ class OnlineEstimator:
         lanelets = self._tick_lanes(best, dets, now, deadline if wall_budget else None, total)
         if best is not None:
             with_support(best, lanelets, self._lanes.lane_support()
-                         if self._lane_key and cfg.lanes_enabled and dets.has_tracks else None)
+                         if self._lane_topo is not None and cfg.lanes_enabled and dets.has_tracks else None)
         t3 = time.perf_counter()
         sampler_state = self._topo.state
         self.result = EstimateResult(
             best, lanelets, {'topology': (t2 - t0) * 1e3, 'lanes': (t3 - t2) * 1e3,
                              'total': (t3 - t0) * 1e3},
-            self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_key else 0,
+            self._topo.samples_drawn, self._lanes.samples_drawn if self._lane_topo is not None else 0,
             self._topo.best_log_posterior, self._convergence.update(now, sampler_state, best),
             len(dets), self._lanes_updated, sampler_state, observability=self._observability)
         return self.result
@@ -535,10 +535,10 @@ class OnlineEstimator:
             return 'none'
         if not cfg.lanes_enabled or not dets.has_tracks:
             return 'straight'
-        same_topology = self._lane_key is not None and same_lanes(best, self._lane_topo)
+        same_topology = same_lanes(best, self._lane_topo)
         if same_topology and now - self._lane_t < cfg.lane_period:
             return 'keep'
-        due = not same_topology or self._lane_key[0] == 'stale'
+        due = not same_topology or self._lane_stale
         if due and self._defer:
             return 'defer'
         return 'initialise' if due else 'run'
@@ -587,7 +587,7 @@ class OnlineEstimator:
         timings = self._lanes.timings            # the lane estimator's own timers [s]
         if step == 'initialise':
             self._lanes.initialise(best, dets)
-            self._lane_key, self._lane_topo = _topology_key(best), best
+            self._lane_topo, self._lane_stale = best, False
         if deadline is not None:
             # the sampler stops at the deadline; the refinement after it (§III-C), at its
             # last cost, does not
@@ -668,12 +668,6 @@ def _prefers(a: TopologyEstimator, b: TopologyEstimator) -> bool:
     gain_a = a.best_log_posterior - a.log_posterior(b.best)
     gain_b = b.best_log_posterior - b.log_posterior(a.best)
     return gain_a > gain_b
-
-
-def _topology_key(best: Intersection) -> tuple:
-    """What the lane course depends on (1 m, 3 deg, lane counts): re-initialise lanes when
-    it changes (§III)."""
-    return ('ok',) + topology_key(best, 1.0, 3.0)
 
 
 def warmup() -> float:

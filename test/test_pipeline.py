@@ -107,8 +107,7 @@ def test_topology_stops_early_when_the_lane_initialisation_is_due(scenario):
     est._topology_phase(dets, False, 5.0, topo_end, lanes_start, 0.15)
     assert len(topo.budgets) == 1 and topo.budgets[0] <= 20.0 + 1e-6
     # the lane course stands for this topology and is not due before lane_period
-    from intersection_estimator.pipeline import _topology_key
-    est._lane_key, est._lane_topo, est._lane_t = _topology_key(scenario.gt), scenario.gt, 4.5
+    est._lane_topo, est._lane_t = scenario.gt, 4.5
     assert est._lane_step(scenario.gt, dets, now=5.0) == 'keep'
     topo.budgets.clear()
     est._topology_phase(dets, False, 5.0, topo_end, lanes_start, 0.15)
@@ -124,7 +123,6 @@ def test_a_lane_reinitialisation_without_room_waits_one_tick(scenario):
     the topology's and the last lanelets stand; the next tick re-initialises regardless.
     The plan counts the MAP state's report beside the initialisation."""
     import time
-    from intersection_estimator.pipeline import _topology_key
     dets = scenario.detections('tracked')
     est = OnlineEstimator(PipelineConfig(), seed=0)
     est._topo = topo = _Topo(scenario.gt)
@@ -136,8 +134,7 @@ def test_a_lane_reinitialisation_without_room_waits_one_tick(scenario):
     est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
     assert not est._defer          # the first initialisation never waits
     est._lanes.initialise(scenario.gt, dets)
-    est._lane_key, est._lane_t = ('stale',) + _topology_key(scenario.gt)[1:], 0.0   # new data since
-    est._lane_topo = scenario.gt
+    est._lane_topo, est._lane_stale, est._lane_t = scenario.gt, True, 0.0   # new data since
     before = est._lanes.lanelets
     topo.budgets.clear()
     est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
@@ -175,11 +172,6 @@ def test_the_lane_course_stands_while_the_topology_stays_within_its_tolerance(sc
     assert same_lanes(wrapped, wrap)
     est = OnlineEstimator(PipelineConfig(), seed=0)
     dets = scenario.detections('tracked')
-    est._lane_key, est._lane_topo, est._lane_t = ('stale',) + _key(gt)[1:], gt, 4.5
+    est._lane_topo, est._lane_stale, est._lane_t = gt, True, 4.5
     assert est._lane_step(moved, dets, now=5.0) == 'keep'        # within the lane period
     assert est._lane_step(rep(gt, center=np.asarray(gt.center, float) + [3.0, 0.0]), dets, now=5.0) == 'initialise'
-
-
-def _key(t):
-    from intersection_estimator.pipeline import _topology_key
-    return _topology_key(t)

@@ -71,13 +71,12 @@ def _sensor_relative(d, ego, i: int, mount, rate) -> np.ndarray:
     """The simulator's Doppler (over ground) as a sensor on the moving ego measures it:
     minus the sensor's velocity (the ego's along its heading plus the mount's lever arm
     turning with it) along each line of sight."""
+    from msg_adapters.detections import over_ground
     sensor = np.array(_compose((ego.xy[i, 0], ego.xy[i, 1], ego.yaw[i]), mount)[:2])
     arm = sensor - ego.xy[i]
     heading = np.array([math.cos(ego.yaw[i]), math.sin(ego.yaw[i])])
     v = ego.speed[i] * heading + rate[i] * np.array([-arm[1], arm[0]])
-    los = d.xy - sensor[None]
-    los /= np.maximum(np.linalg.norm(los, axis=1, keepdims=True), 1e-6)
-    return d.doppler - los @ v
+    return over_ground(d.doppler, d.xy, sensor, -v)    # the inverse: minus the sensor's motion
 
 
 def _yaw_rate(t, yaw):
