@@ -8,8 +8,9 @@ import pytest
 from test_lanes_synth import synth_case
 
 from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
-from intersection_estimator.lanes.init import split_at_center, trajectories
-from intersection_estimator.model import Arm, Intersection
+from intersection_estimator.lanes.init import (Trajectory, arm_frames, assign_parts, split_at_center,
+                                               stop_distances, trajectories)
+from intersection_estimator.model import ENTERING, LEAVING, Arm, Intersection
 from intersection_estimator.observations import Detections
 
 CASE = synth_case(3, n_arms=4, lanes=(2, 1), per_lane=2, length=40.0)
@@ -84,6 +85,31 @@ def test_lane_course_close_to_truth():
 def test_split_at_closest_point_to_center():
     xy = np.array([[10.0, 0.0], [5.0, 0.0], [1.0, 0.5], [0.0, 4.0], [0.0, 9.0]])
     assert split_at_center(xy, np.zeros(2)) == 2
+
+
+def _crossing_track(topo, beyond_stop: float) -> Trajectory:
+    """A vehicle on arm 0's entering lane, straight through the box, on arm 2's leaving
+    lane up to ``beyond_stop`` metres past that arm's stop line (1 m apart)."""
+    fr, stops = arm_frames(topo), stop_distances(topo, LaneConfig())
+    f_in, f_out = fr[0], fr[2]
+    s_in = np.arange(50.0, -0.5, -1.0)
+    s_out = np.arange(1.0, stops[2] + beyond_stop + 0.01, 1.0)
+    xy = np.concatenate([f_in.point(s_in, f_in.lat[(ENTERING, 0)]),
+                         f_out.point(s_out, f_out.lat[(LEAVING, 0)])])
+    return Trajectory(0, xy)
+
+
+@pytest.mark.parametrize('beyond', [1.5, 3.0])
+def test_a_track_seen_only_a_few_metres_beyond_the_stop_line_still_gets_its_lane(beyond):
+    """The stop line is a corner construction, metres out on real junctions: a track that
+    leaves the sensor's range just past it keeps its leaving lane (``assign_inside``), and
+    with it the connector; counted from the stop line alone (0) it had none."""
+    topo = Intersection(center=[0.0, 0.0], arms=[Arm(angle=a, gap=1.0) for a in
+                                                   (0.0, np.pi / 2, np.pi, -np.pi / 2)])
+    for inside, lane_out in ((0.0, None), (LaneConfig().assign_inside, (2, 0))):
+        tr = _crossing_track(topo, beyond)
+        assign_parts([tr], topo, LaneConfig(assign_inside=inside))
+        assert tr.lane_in == (0, 0) and tr.lane_out == lane_out
 
 
 def test_trajectories_sorted_by_time_and_ignore_untracked():

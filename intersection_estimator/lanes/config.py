@@ -73,7 +73,8 @@ _RANGES = {
     'arm_length_max': ('[5.0, 500.0]', 'longest entering/leaving lanelet [m]'),
     'stop_margin': ('[0.0, 20.0]', 'extra distance of the stop line beyond the corner of two arms [m]'),
     'kerb_radius': ('[0.0, 50.0]', 'radius of the rounded kerb between two arms [m]'),
-    'assign_inside': ('[0.0, 50.0]', 'part points this far inside the stop line still count [m]'),
+    'assign_inside': ('[0.0, 50.0]', 'part points this far inside the stop line still count for '
+                      'the lane assignment (a track seen only a few metres beyond it) [m]'),
     'min_part_length': ('[0.0, 200.0]', 'shortest extent along its arm of a trajectory part [m]'),
     'stop_min': ('[0.0, 100.0]', 'smallest stop-line distance from the center [m]'),
     'stop_max': ('[0.0, 200.0]', 'largest stop-line distance from the center [m]'),
@@ -161,7 +162,7 @@ class LaneConfig:
     arm_length_max: float = 120.0
     stop_margin: float = 2.5
     kerb_radius: float = 5.0
-    assign_inside: float = 0.0
+    assign_inside: float = 9.0
     min_part_length: float = 5.0
     stop_min: float = 3.0
     stop_max: float = 100.0

@@ -156,6 +156,13 @@ def assign_parts(trajs: list[Trajectory], topo: Intersection, cfg: LaneConfig,
     part; points inside the intersection belong to the turn and would bias it). The
     part must head the lane's way and have ``min_part_points`` points there spanning
     at least ``min_part_length`` metres.
+
+    "Beyond the stop line" reaches ``assign_inside`` metres into the box (beyond the
+    paper): the stop line here is a construction from the arms' corners, and on real
+    junctions it lies metres farther out than the lane's true end (docs/real_junctions.md,
+    "Parts that end near the box"); a vehicle the sensor saw only a few metres past it --
+    a track that begins in the box or leaves the sensor's range just after it -- would
+    otherwise give no part, and its turn no connector.
     """
     if stops is None:
         stops = stop_distances(topo, cfg)
