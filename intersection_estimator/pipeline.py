@@ -271,10 +271,13 @@ class OnlineEstimator:
         self._lane_topo = None            # the topology the lane course was initialised on
         self._lane_stale = False          # observations came since that initialisation
         self._lane_t = -np.inf
-        self._init_s = deque(maxlen=INIT_COSTS)   # [s] recent lane initialisations + refinements
+        self._prepare_s = deque(maxlen=INIT_COSTS)  # [s] recent first halves of lane initialisations
+        self._finish_s = deque(maxlen=INIT_COSTS)   # [s] ... second halves + refinements
         self._report_s = deque(maxlen=INIT_COSTS)  # [s] recent reports of the MAP state
         self._defer = False               # this tick has no room for a lane initialisation
         self._deferred = False            # the last lane initialisation due waited a tick
+        self._split = False               # ... so this tick prepares its first half only
+        self._prep_topo = None            # the topology that first half was prepared on
         self._dirty = False
         self._idle_ticks = 0              # ticks since the last new observations
         self._approached = False
@@ -444,7 +447,7 @@ class OnlineEstimator:
         deadline = t0 + total
         self.track_queued()
         topo_end = t0 + total * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)
-        self._defer = False
+        self._defer = self._split = False
         with self._lock:
             dirty, self._dirty = self._dirty, False
             self._idle_ticks = 0 if dirty else self._idle_ticks + 1
@@ -466,8 +469,7 @@ class OnlineEstimator:
             else:
                 self._topo.run(n_samples=cfg.topology_samples)
         else:
-            self._topology_phase(dets, restart, now, topo_end,
-                                 deadline - self._init_cost_s() - MIN_SHARE * total, total)
+            self._topology_phase(dets, restart, now, topo_end, deadline, total)
         t1 = time.perf_counter()
         best = self._topo.best
         # before the lane step, whose wall deadline then absorbs it (at lane cadence)
@@ -489,16 +491,24 @@ class OnlineEstimator:
         return self.result
 
     def _topology_phase(self, dets: Detections, restart: bool, now: float, topo_end: float,
-                        lanes_start: float, total: float) -> None:
-        """Wall-mode topology step: until ``lanes_start`` (the latest start of the MAP
-        state's report and a lane initialisation that, with a least sampler share and its
-        refinement, end in time) if that comes before ``topo_end``, then on to ``topo_end``
-        unless the lane course is initialised this tick (:meth:`_lanes_due`). When even the
-        least topology share leaves no room for a lane re-initialisation, the tick is the
-        topology's alone and the re-initialisation waits for the next (once in a row:
-        ``_deferred``; the first initialisation never waits)."""
+                        deadline: float, total: float) -> None:
+        """Wall-mode topology step: until the latest start of the lane work this tick may do
+        (:meth:`_lanes_start`) if that comes before ``topo_end``, then on to ``topo_end``
+        unless the lane course is initialised this tick (:meth:`_lanes_due`).
+
+        When even the least topology share leaves no room for a whole lane
+        re-initialisation, it is spread over the next ticks: the first such tick is the
+        topology's alone (``_defer``: in the node, the tick that publishes the waiting
+        lanelets), the next prepares its first half (``_split``: trajectories, frames, stop
+        lines, the approach lanes shaped by their traffic), the one after finishes it
+        (connectors, the lane graph, the sampler). The first initialisation never waits."""
         least = time.perf_counter() + MIN_SHARE * total
-        self._defer = lanes_start < least and not self._deferred and self._lanes.graph is not None
+        lanes_start = self._lanes_start(deadline, total)
+        no_room = lanes_start < least and self._lanes.graph is not None and not self._lanes.pending
+        self._defer = no_room and not self._deferred
+        self._split = no_room and self._deferred
+        if self._split:                 # the first half only, and no sampler after it
+            lanes_start = deadline - max(self._report_s, default=0.0) - max(self._prepare_s, default=0.0)
         first = topo_end if self._defer else min(topo_end, max(lanes_start, least))
         if restart:
             self._restart(dets, first, total)
@@ -511,36 +521,46 @@ class OnlineEstimator:
                 and not self._lanes_due(best, dets, now)):
             self._topo.run(time_budget_s=topo_end - time.perf_counter())
 
-    def _init_cost_s(self) -> float:
-        """[s] what a lane update cannot cut short, planned at the longest of its recent
-        costs (0 before the first): the report of the topology's MAP state it starts from
-        (support, weak arms) and the lane initialisation with the refinement after its
-        sampler. On a large junction's radar window (SUMO seed 121) the report alone is
-        11-13 ms a tick, which the plan once left out."""
-        return max(self._report_s, default=0.0) + max(self._init_s, default=0.0)
+    def _lanes_start(self, deadline: float, total: float) -> float:
+        """Latest start of this tick's lane work that, with a least sampler share, ends by
+        ``deadline``: the report of the topology's MAP state and the lane initialisation
+        (both halves; only the second when the first is prepared), each planned at the
+        longest of its recent costs (0 before the first). On a large junction's radar window
+        (SUMO seed 121) the report alone is 11-13 ms a tick, which the plan once left out."""
+        init = max(self._finish_s, default=0.0)
+        if not self._lanes.pending:
+            init += max(self._prepare_s, default=0.0)
+        return deadline - max(self._report_s, default=0.0) - init - MIN_SHARE * total
 
     def _lanes_due(self, best, dets: Detections, now: float) -> bool:
-        """Will :meth:`_tick_lanes` initialise the lane course (§III-A) this tick?"""
-        return self._lane_step(best, dets, now) == 'initialise'
+        """Will :meth:`_tick_lanes` initialise the lane course (§III-A) this tick, or a half
+        of it?"""
+        return self._lane_step(best, dets, now) in ('initialise', 'prepare', 'finish')
 
     def _lane_step(self, best, dets: Detections, now: float) -> str:
         """What :meth:`_tick_lanes` does: 'none' (no topology), 'straight' (lanelets from
-        the topology), 'keep' (the last lanelets stand), 'initialise', 'run', or 'defer': an
-        initialisation due in a wall-mode tick without room for it (:meth:`_topology_phase`)
-        waits one tick while the last lanelets stand -- in the node, the tick that publishes
-        the waiting lane course leaves the estimation less than a lane update costs on a
-        large junction, and both together overran the budget by a fifth."""
+        the topology), 'keep' (the last lanelets stand), 'initialise', 'run'; in a wall-mode
+        tick without room for an initialisation that is due (:meth:`_topology_phase`)
+        'defer' (it waits while the last lanelets stand), then 'prepare' (its first half),
+        and 'finish' in the tick after that (the second half and the sampler) -- in the
+        node, the tick that publishes the waiting lane course leaves the estimation less
+        than a lane update costs on a large junction, and both together overran the budget
+        by a fifth; a whole initialisation after one such tick still overran it."""
         cfg = self.config
         if best is None:
             return 'none'
         if not cfg.lanes_enabled or not dets.has_tracks:
             return 'straight'
+        if self._lanes.pending:
+            return 'finish'
         same_topology = same_lanes(best, self._lane_topo)
         if same_topology and now - self._lane_t < cfg.lane_period:
             return 'keep'
         due = not same_topology or self._lane_stale
         if due and self._defer:
             return 'defer'
+        if due and self._split:
+            return 'prepare'
         return 'initialise' if due else 'run'
 
     def _restart(self, dets: Detections, topo_end: float | None, total: float) -> None:
@@ -583,11 +603,20 @@ class OnlineEstimator:
         if step in ('keep', 'defer'):
             self._lanes_updated = False
             return self._lanes.lanelets
-        self._lane_t = now
         timings = self._lanes.timings            # the lane estimator's own timers [s]
+        if step == 'prepare':                    # the last lanelets stand one more tick
+            self._lanes.prepare(best, dets)
+            self._prep_topo = best
+            self._prepare_s.append(timings['prepare'])
+            self._lanes_updated = False
+            return self._lanes.lanelets
+        self._lane_t = now
         if step == 'initialise':
             self._lanes.initialise(best, dets)
             self._lane_topo, self._lane_stale = best, False
+        elif step == 'finish':
+            self._lanes.finish()
+            self._lane_topo, self._lane_stale = self._prep_topo, False
         if deadline is not None:
             # the sampler stops at the deadline; the refinement after it (§III-C), at its
             # last cost, does not
@@ -596,7 +625,9 @@ class OnlineEstimator:
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
         if step == 'initialise':
-            self._init_s.append(timings['initialise'] + timings.get('refine', 0.0))
+            self._prepare_s.append(timings['prepare'])
+        if step in ('initialise', 'finish'):
+            self._finish_s.append(timings['finish'] + timings.get('refine', 0.0))
         return self._lanes.lanelets
 
 

@@ -117,39 +117,65 @@ def test_topology_stops_early_when_the_lane_initialisation_is_due(scenario):
     assert est._lane_step(None, dets, now=9.0) == 'none'
 
 
-def test_a_lane_reinitialisation_without_room_waits_one_tick(scenario):
+def test_a_lane_reinitialisation_without_room_is_spread_over_three_ticks(scenario):
     """Wall mode: when even the least topology share leaves no room for re-initialising
     the lane course (the node's tick that also publishes the waiting lanelets), the tick is
-    the topology's and the last lanelets stand; the next tick re-initialises regardless.
-    The plan counts the MAP state's report beside the initialisation."""
+    the topology's and the last lanelets stand; the next tick prepares the first half
+    (the last lanelets still stand), the one after finishes it. The plan counts the MAP
+    state's report beside both halves."""
     import time
     dets = scenario.detections('tracked')
     est = OnlineEstimator(PipelineConfig(), seed=0)
     est._topo = topo = _Topo(scenario.gt)
     est._report_s.append(0.012)
-    est._init_s.append(0.080)
-    assert est._init_cost_s() == pytest.approx(0.092)
+    est._prepare_s.append(0.050)
+    est._finish_s.append(0.030)
     t0 = time.perf_counter()
-    topo_end, no_room = t0 + 60.0, t0 - 1.0
+    assert est._lanes_start(t0 + 1.0, 0.15) == pytest.approx(t0 + 1.0 - 0.092 - 0.0075)
+    topo_end, no_room = t0 + 60.0, t0 + 0.05    # whole: 92 ms + least share > 50 ms left
     est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
-    assert not est._defer          # the first initialisation never waits
+    assert not est._defer and not est._split      # the first initialisation never waits
     est._lanes.initialise(scenario.gt, dets)
     est._lane_topo, est._lane_stale, est._lane_t = scenario.gt, True, 0.0   # new data since
-    before = est._lanes.lanelets
-    topo.budgets.clear()
-    est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
-    assert est._lane_step(scenario.gt, dets, 5.0) == 'defer'
-    assert len(topo.budgets) == 1 and topo.budgets[0] > 30.0      # the topology keeps the tick
-    kept = est._tick_lanes(scenario.gt, dets, 5.0, None, 0.15)
-    assert not est._lanes_updated and [l.id for l in kept] == [l.id for l in before]
-    topo.budgets.clear()
-    est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)   # the next tick: no wait
-    assert est._lane_step(scenario.gt, dets, 5.0) == 'initialise'
-    assert topo.budgets[0] <= 0.15
-    # with room the re-initialisation never waits
-    est._deferred = False
-    est._topology_phase(dets, False, 5.0, topo_end, t0 + 20.0, 0.15)
-    assert est._lane_step(scenario.gt, dets, 5.0) == 'initialise'
+    before = [l.id for l in est._lanes.lanelets]
+
+    def tick(deadline):
+        topo.budgets.clear()
+        est._topology_phase(dets, False, 5.0, topo_end, deadline, 0.15)
+        step = est._lane_step(scenario.gt, dets, 5.0)
+        lanes = est._tick_lanes(scenario.gt, dets, 5.0, None, 0.15)
+        return step, [l.id for l in lanes]
+
+    step, ids = tick(time.perf_counter() + 0.05)
+    assert step == 'defer' and ids == before and not est._lanes_updated
+    assert len(topo.budgets) == 1 and topo.budgets[0] > 30.0       # the topology keeps the tick
+    step, ids = tick(time.perf_counter() + 0.05)
+    assert step == 'prepare' and est._lanes.pending and ids == before and not est._lanes_updated
+    assert topo.budgets[0] < 0.05                # stops for the report and the first half only
+    step, ids = tick(time.perf_counter() + 0.05)
+    assert step == 'finish' and not est._lanes.pending and est._lanes_updated
+    assert est._lane_topo is scenario.gt and not est._lane_stale
+    # with room a re-initialisation is done whole, in one tick
+    est._lane_stale, est._lane_t = True, 0.0
+    step, _ = tick(time.perf_counter() + 20.0)
+    assert step == 'initialise' and not est._lanes.pending
+
+
+def test_a_lane_initialisation_in_two_halves_is_the_whole_one(scenario):
+    """``prepare`` then ``finish`` (two ticks apart in the node) build exactly the lanelets
+    of ``initialise``; until ``finish`` the previous lane course stands."""
+    from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator
+    dets = scenario.detections('tracked')
+    whole, halves = LaneCourseEstimator(LaneConfig(), 3), LaneCourseEstimator(LaneConfig(), 3)
+    whole.initialise(scenario.gt, dets)
+    halves.prepare(scenario.gt, dets)
+    assert halves.pending and halves.lanelets == [] and halves.graph is None
+    halves.finish()
+    assert not halves.pending
+    a, b = whole.lanelets, halves.lanelets
+    assert [l.id for l in a] == [l.id for l in b] and len(a) > 0
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x.center, y.center)
 
 
 def test_the_lane_course_stands_while_the_topology_stays_within_its_tolerance(scenario):

@@ -17,8 +17,8 @@ from scipy.spatial import cKDTree
 from ..model import ENTERING, LEAVING, Intersection, Lanelet, topology_key
 from ..observations import Detections
 from .config import LaneConfig
-from .init import (arm_frames, assign_parts, chord_arms, connector_id, fit_frames, lane_id,
-                   lane_specs, stop_distances, trajectories)
+from .init import (add_connectors, arm_frames, assign_parts, chord_arms, connector_id, fit_frames,
+                   lane_id, lane_specs, stop_distances, trajectories)
 from .likelihood import all_terms, assign_points, station_csr
 from . import mcmc as M
 from .mcmc import run_chain
@@ -117,6 +117,7 @@ class LaneCourseEstimator:
         self._k = 0
         self.timings: dict = {}
         self.last_chain = (0, 0.0, 0.0)   # (accepted, dlogP of final state, of best state)
+        self._pending = None              # a prepared half of an initialisation (prepare)
 
     # ------------------------------------------------------------------ setup
     def initialise(self, topology: Intersection, dets: Detections | None) -> None:
@@ -126,12 +127,35 @@ class LaneCourseEstimator:
         unchanged and the new initial course lies within ``warm_tolerance`` of the
         current one; then only the trajectory points are re-assigned. Otherwise the
         new observations moved the initialisation (stop lines, lane fits) and the
-        lanelets are rebuilt from it."""
+        lanelets are rebuilt from it. The two halves, :meth:`prepare` and :meth:`finish`,
+        may also run apart (the online pipeline does when one tick has no room for both)."""
+        self.prepare(topology, dets)
+        self.finish()
+
+    @property
+    def pending(self) -> bool:
+        """Has :meth:`prepare` run without its :meth:`finish`?"""
+        return self._pending is not None
+
+    def prepare(self, topology: Intersection, dets: Detections | None) -> None:
+        """First half of :meth:`initialise`: the trajectories split and assigned, the arm
+        frames and stop lines fitted, the entering / leaving lanelets shaped by their
+        traffic. The current lanelets and chain stand until :meth:`finish`."""
         t0 = time.perf_counter()
         topology = chord_arms(topology)
-        self._trajs, frames, self.stops = self._preprocess(topology, dets)
-        specs, pairs, _ = lane_specs(topology, self._trajs, self.config, stops=self.stops,
-                                     frames=frames)
+        trajs, frames, stops = self._preprocess(topology, dets)
+        specs, pairs, index = lane_specs(topology, trajs, self.config, connectors=False,
+                                         stops=stops, frames=frames)
+        self._pending = (topology, trajs, stops, specs, pairs, index)
+        self.timings['prepare'] = time.perf_counter() - t0
+
+    def finish(self) -> None:
+        """Second half of :meth:`initialise`: the connectors between the prepared lanes
+        (fitted to their traffic), then the lane graph -- or the chain kept (warm start)."""
+        t0 = time.perf_counter()
+        topology, self._trajs, self.stops, specs, pairs, index = self._pending
+        self._pending = None
+        add_connectors(specs, index, self._trajs, self.config)
         key = (_topology_key(topology), tuple(s.id for s in specs))
         if self.graph is not None and key == self._key and self._close_to(specs):
             self._setup_likelihood()
@@ -140,7 +164,8 @@ class LaneCourseEstimator:
             self.graph = build_graph(specs, pairs) if specs else None
             if self.graph is not None:
                 self._setup_graph()
-        self.timings['initialise'] = time.perf_counter() - t0
+        self.timings['finish'] = time.perf_counter() - t0
+        self.timings['initialise'] = self.timings['prepare'] + self.timings['finish']
 
     def _close_to(self, specs) -> bool:
         g = self.graph

@@ -33,7 +33,7 @@ from .follow import arm_shift, driven_lanes, follow_borders, nearest_lanes
 from .spline import noise_variance, traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
-           'lane_specs', 'lane_id', 'connector_id']
+           'lane_specs', 'add_connectors', 'lane_id', 'connector_id']
 
 
 @dataclass
@@ -572,12 +572,22 @@ def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
 
 def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
                length: float | None = None, connectors: bool = True, stops=None, frames=None):
-    """Specs of all entering/leaving lanelets and evidenced connectors."""
+    """Specs of all entering/leaving lanelets and (``connectors``) the evidenced
+    connectors (:func:`add_connectors`); also the interior neighbour pairs and the index
+    ``(arm, direction, k) -> spec``."""
     stops = stop_distances(topo, cfg) if stops is None else stops
     frames = arm_frames(topo) if frames is None else frames
     specs, pairs, index = _straight_lanes(topo, frames, stops, trajs, cfg, length)
-    if not connectors:
-        return specs, pairs, index
+    if connectors:
+        add_connectors(specs, index, trajs, cfg)
+    return specs, pairs, index
+
+
+def add_connectors(specs: list, index: dict, trajs: list[Trajectory], cfg: LaneConfig) -> None:
+    """Append to ``specs`` a connector for every pair of entering / leaving lanes that
+    ``min_connector_evidence`` trajectories connect (§III-A), shaped by their traffic
+    (``connector_traffic``, lanes/spline.py); ``specs`` / ``index`` as :func:`lane_specs`
+    made them without connectors."""
     count: dict = {}
     driven: dict = {}
     for tr in trajs:
@@ -608,4 +618,3 @@ def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
             left_keys=lk, right_keys=rk, predecessor=e, successor=o, successors=[o],
             evidence=m))
         E.successors.append(len(specs) - 1)
-    return specs, pairs, index
