@@ -82,6 +82,22 @@ def test_lane_course_close_to_truth():
     assert np.mean(errs) < 0.35
 
 
+def test_an_initialisation_in_two_halves_is_the_whole_one():
+    """``prepare`` then ``finish`` (two ticks apart in the node) build exactly the lanelets
+    of ``initialise``; until ``finish`` the previous lane course stands."""
+    topo, _, _, dets = CASE
+    whole, halves = LaneCourseEstimator(LaneConfig(), 3), LaneCourseEstimator(LaneConfig(), 3)
+    whole.initialise(topo, dets)
+    halves.prepare(topo, dets)
+    assert halves.pending and halves.lanelets == [] and halves.graph is None
+    halves.finish()
+    assert not halves.pending
+    a, b = whole.lanelets, halves.lanelets
+    assert [l.id for l in a] == [l.id for l in b] and any(l.kind == 'connector' for l in a)
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x.center, y.center)
+
+
 def test_split_at_closest_point_to_center():
     xy = np.array([[10.0, 0.0], [5.0, 0.0], [1.0, 0.5], [0.0, 4.0], [0.0, 9.0]])
     assert split_at_center(xy, np.zeros(2)) == 2

@@ -161,23 +161,6 @@ def test_a_lane_reinitialisation_without_room_is_spread_over_three_ticks(scenari
     assert step == 'initialise' and not est._lanes.pending
 
 
-def test_a_lane_initialisation_in_two_halves_is_the_whole_one(scenario):
-    """``prepare`` then ``finish`` (two ticks apart in the node) build exactly the lanelets
-    of ``initialise``; until ``finish`` the previous lane course stands."""
-    from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator
-    dets = scenario.detections('tracked')
-    whole, halves = LaneCourseEstimator(LaneConfig(), 3), LaneCourseEstimator(LaneConfig(), 3)
-    whole.initialise(scenario.gt, dets)
-    halves.prepare(scenario.gt, dets)
-    assert halves.pending and halves.lanelets == [] and halves.graph is None
-    halves.finish()
-    assert not halves.pending
-    a, b = whole.lanelets, halves.lanelets
-    assert [l.id for l in a] == [l.id for l in b] and len(a) > 0
-    for x, y in zip(a, b):
-        np.testing.assert_array_equal(x.center, y.center)
-
-
 def test_the_lane_course_stands_while_the_topology_stays_within_its_tolerance(scenario):
     """A MAP state that moves less than 1 m / 3 deg keeps the lane course (no re-initialisation
     when it merely crosses a grid line); more, another lane count or another arm set does not."""
