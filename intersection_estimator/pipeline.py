@@ -607,7 +607,7 @@ class OnlineEstimator:
         if step == 'prepare':                    # the last lanelets stand one more tick
             self._lanes.prepare(best, dets)
             self._prep_topo = best
-            self._prepare_s.append(timings['prepare'])
+            self._prepare_s.append(self._lanes.halves['prepare'])
             self._lanes_updated = False
             return self._lanes.lanelets
         self._lane_t = now
@@ -625,9 +625,9 @@ class OnlineEstimator:
         else:
             self._lanes.run(n_samples=cfg.lane_samples)
         if step == 'initialise':
-            self._prepare_s.append(timings['prepare'])
+            self._prepare_s.append(self._lanes.halves['prepare'])
         if step in ('initialise', 'finish'):
-            self._finish_s.append(timings['finish'] + timings.get('refine', 0.0))
+            self._finish_s.append(self._lanes.halves['finish'] + timings.get('refine', 0.0))
         return self._lanes.lanelets
 
 

@@ -118,6 +118,7 @@ class LaneCourseEstimator:
         self.timings: dict = {}
         self.last_chain = (0, 0.0, 0.0)   # (accepted, dlogP of final state, of best state)
         self._pending = None              # a prepared half of an initialisation (prepare)
+        self.halves: dict = {}            # [s] the last prepare / finish (timings: their sum)
 
     # ------------------------------------------------------------------ setup
     def initialise(self, topology: Intersection, dets: Detections | None) -> None:
@@ -147,7 +148,7 @@ class LaneCourseEstimator:
         specs, pairs, index = lane_specs(topology, trajs, self.config, connectors=False,
                                          stops=stops, frames=frames)
         self._pending = (topology, trajs, stops, specs, pairs, index)
-        self.timings['prepare'] = time.perf_counter() - t0
+        self.halves['prepare'] = time.perf_counter() - t0
 
     def finish(self) -> None:
         """Second half of :meth:`initialise`: the connectors between the prepared lanes
@@ -164,8 +165,8 @@ class LaneCourseEstimator:
             self.graph = build_graph(specs, pairs) if specs else None
             if self.graph is not None:
                 self._setup_graph()
-        self.timings['finish'] = time.perf_counter() - t0
-        self.timings['initialise'] = self.timings['prepare'] + self.timings['finish']
+        self.halves['finish'] = time.perf_counter() - t0
+        self.timings['initialise'] = self.halves['prepare'] + self.halves['finish']
 
     def _close_to(self, specs) -> bool:
         g = self.graph
