@@ -274,9 +274,8 @@ class OnlineEstimator:
         self._prepare_s = deque(maxlen=INIT_COSTS)  # [s] recent first halves of lane initialisations
         self._finish_s = deque(maxlen=INIT_COSTS)   # [s] ... second halves + refinements
         self._report_s = deque(maxlen=INIT_COSTS)  # [s] recent reports of the MAP state
-        self._defer = False               # this tick has no room for a lane initialisation
+        self._no_room = False             # this tick has no room for a whole lane initialisation
         self._deferred = False            # the last lane initialisation due waited a tick
-        self._split = False               # ... so this tick prepares its first half only
         self._prep_topo = None            # the topology that first half was prepared on
         self._dirty = False
         self._idle_ticks = 0              # ticks since the last new observations
@@ -447,7 +446,7 @@ class OnlineEstimator:
         deadline = t0 + total
         self.track_queued()
         topo_end = t0 + total * (1 - cfg.lane_share if cfg.lanes_enabled else 1.0)
-        self._defer = self._split = False
+        self._no_room = False
         with self._lock:
             dirty, self._dirty = self._dirty, False
             self._idle_ticks = 0 if dirty else self._idle_ticks + 1
@@ -497,19 +496,19 @@ class OnlineEstimator:
         unless the lane course is initialised this tick (:meth:`_lanes_due`).
 
         When even the least topology share leaves no room for a whole lane
-        re-initialisation, it is spread over the next ticks: the first such tick is the
-        topology's alone (``_defer``: in the node, the tick that publishes the waiting
-        lanelets), the next prepares its first half (``_split``: trajectories, frames, stop
-        lines, the approach lanes shaped by their traffic), the one after finishes it
-        (connectors, the lane graph, the sampler). The first initialisation never waits."""
+        re-initialisation (``_no_room``), it is spread over the next ticks: the first such
+        tick is the topology's alone (in the node, the tick that publishes the waiting
+        lanelets), the next -- after that wait (``_deferred``) -- prepares its first half
+        (trajectories, frames, stop lines, the approach lanes shaped by their traffic), the
+        one after finishes it (connectors, the lane graph, the sampler). The first
+        initialisation never waits."""
         least = time.perf_counter() + MIN_SHARE * total
         lanes_start = self._lanes_start(deadline, total)
-        no_room = lanes_start < least and self._lanes.graph is not None and not self._lanes.pending
-        self._defer = no_room and not self._deferred
-        self._split = no_room and self._deferred
-        if self._split:                 # the first half only, and no sampler after it
-            lanes_start = deadline - max(self._report_s, default=0.0) - max(self._prepare_s, default=0.0)
-        first = topo_end if self._defer else min(topo_end, max(lanes_start, least))
+        self._no_room = lanes_start < least and self._lanes.graph is not None and not self._lanes.pending
+        if self._no_room:                  # the first half only, and no sampler after it
+            lanes_start = self._lanes_start(deadline, total, first_half=True)
+        first = topo_end if self._no_room and not self._deferred \
+            else min(topo_end, max(lanes_start, least))
         if restart:
             self._restart(dets, first, total)
         else:
@@ -521,16 +520,18 @@ class OnlineEstimator:
                 and not self._lanes_due(best, dets, now)):
             self._topo.run(time_budget_s=topo_end - time.perf_counter())
 
-    def _lanes_start(self, deadline: float, total: float) -> float:
-        """Latest start of this tick's lane work that, with a least sampler share, ends by
-        ``deadline``: the report of the topology's MAP state and the lane initialisation
-        (both halves; only the second when the first is prepared), each planned at the
-        longest of its recent costs (0 before the first). On a large junction's radar window
-        (SUMO seed 121) the report alone is 11-13 ms a tick, which the plan once left out."""
-        init = max(self._finish_s, default=0.0)
-        if not self._lanes.pending:
-            init += max(self._prepare_s, default=0.0)
-        return deadline - max(self._report_s, default=0.0) - init - MIN_SHARE * total
+    def _lanes_start(self, deadline: float, total: float, first_half: bool = False) -> float:
+        """Latest start of this tick's lane work that ends by ``deadline``: the report of the
+        topology's MAP state and the lane initialisation -- both halves, only the second when
+        the first is prepared, each with a least sampler share after it; or (``first_half``)
+        the first half alone, with no sampler -- each planned at the longest of its recent
+        costs (0 before the first). On a large junction's radar window (SUMO seed 121) the
+        report alone is 11-13 ms a tick, which the plan once left out."""
+        report, prepare = max(self._report_s, default=0.0), max(self._prepare_s, default=0.0)
+        if first_half:
+            return deadline - report - prepare
+        init = max(self._finish_s, default=0.0) + (0.0 if self._lanes.pending else prepare)
+        return deadline - report - init - MIN_SHARE * total
 
     def _lanes_due(self, best, dets: Detections, now: float) -> bool:
         """Will :meth:`_tick_lanes` initialise the lane course (§III-A) this tick, or a half
@@ -557,10 +558,8 @@ class OnlineEstimator:
         if same_topology and now - self._lane_t < cfg.lane_period:
             return 'keep'
         due = not same_topology or self._lane_stale
-        if due and self._defer:
-            return 'defer'
-        if due and self._split:
-            return 'prepare'
+        if due and self._no_room:
+            return 'prepare' if self._deferred else 'defer'
         return 'initialise' if due else 'run'
 
     def _restart(self, dets: Detections, topo_end: float | None, total: float) -> None:

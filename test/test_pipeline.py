@@ -134,7 +134,7 @@ def test_a_lane_reinitialisation_without_room_is_spread_over_three_ticks(scenari
     assert est._lanes_start(t0 + 1.0, 0.15) == pytest.approx(t0 + 1.0 - 0.092 - 0.0075)
     topo_end, no_room = t0 + 60.0, t0 + 0.05    # whole: 92 ms + least share > 50 ms left
     est._topology_phase(dets, False, 5.0, topo_end, no_room, 0.15)
-    assert not est._defer and not est._split      # the first initialisation never waits
+    assert not est._no_room                      # the first initialisation never waits
     est._lanes.initialise(scenario.gt, dets)
     est._lane_topo, est._lane_stale, est._lane_t = scenario.gt, True, 0.0   # new data since
     before = [l.id for l in est._lanes.lanelets]
