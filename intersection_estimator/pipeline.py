@@ -276,7 +276,6 @@ class OnlineEstimator:
         self._report_s = deque(maxlen=INIT_COSTS)  # [s] recent reports of the MAP state
         self._no_room = False             # this tick has no room for a whole lane initialisation
         self._deferred = False            # the last lane initialisation due waited a tick
-        self._prep_topo = None            # the topology that first half was prepared on
         self._dirty = False
         self._idle_ticks = 0              # ticks since the last new observations
         self._approached = False
@@ -605,7 +604,6 @@ class OnlineEstimator:
         timings = self._lanes.timings            # the lane estimator's own timers [s]
         if step == 'prepare':                    # the last lanelets stand one more tick
             self._lanes.prepare(best, dets)
-            self._prep_topo = best
             self._prepare_s.append(self._lanes.halves['prepare'])
             self._lanes_updated = False
             return self._lanes.lanelets
@@ -614,8 +612,7 @@ class OnlineEstimator:
             self._lanes.initialise(best, dets)
             self._lane_topo, self._lane_stale = best, False
         elif step == 'finish':
-            self._lanes.finish()
-            self._lane_topo, self._lane_stale = self._prep_topo, False
+            self._lane_topo, self._lane_stale = self._lanes.finish(), False
         if deadline is not None:
             # the sampler stops at the deadline; the refinement after it (§III-C), at its
             # last cost, does not

@@ -143,18 +143,19 @@ class LaneCourseEstimator:
         frames and stop lines fitted, the entering / leaving lanelets shaped by their
         traffic. The current lanelets and chain stand until :meth:`finish`."""
         t0 = time.perf_counter()
-        topology = chord_arms(topology)
+        given, topology = topology, chord_arms(topology)
         trajs, frames, stops = self._preprocess(topology, dets)
         specs, pairs, index = lane_specs(topology, trajs, self.config, connectors=False,
                                          stops=stops, frames=frames)
-        self._pending = (topology, trajs, stops, specs, pairs, index)
+        self._pending = (given, topology, trajs, stops, specs, pairs, index)
         self.halves['prepare'] = time.perf_counter() - t0
 
-    def finish(self) -> None:
+    def finish(self) -> Intersection:
         """Second half of :meth:`initialise`: the connectors between the prepared lanes
-        (fitted to their traffic), then the lane graph -- or the chain kept (warm start)."""
+        (fitted to their traffic), then the lane graph -- or the chain kept (warm start).
+        Returns the topology :meth:`prepare` was given (the course is now built on it)."""
         t0 = time.perf_counter()
-        topology, self._trajs, self.stops, specs, pairs, index = self._pending
+        given, topology, self._trajs, self.stops, specs, pairs, index = self._pending
         self._pending = None
         add_connectors(specs, index, self._trajs, self.config)
         key = (_topology_key(topology), tuple(s.id for s in specs))
@@ -167,6 +168,7 @@ class LaneCourseEstimator:
                 self._setup_graph()
         self.halves['finish'] = time.perf_counter() - t0
         self.timings['initialise'] = self.halves['prepare'] + self.halves['finish']
+        return given
 
     def _close_to(self, specs) -> bool:
         g = self.graph
