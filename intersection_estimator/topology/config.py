@@ -121,6 +121,12 @@ RANGES = {
     'min_part_points': ('[1, 1000]', 'trajectory parts with fewer points are dropped'),
     'min_part_length': ('[0, 100]', 'trajectory parts with a shorter extent are dropped [m]'),
     'min_track_speed': ('[0, 50]', 'tracks never faster than this are static (false) [m/s]'),
+    'standing_weight': ('[0, 100]', 'weight of a vehicle that stood through the recording (a '
+                        'queue): evidence of its arm, sigma_track_weak across (topology/standing.py; '
+                        '0: standing vehicles are not observations)'),
+    'standing_min_s': ('[0, 3600]', 'a standing track is a vehicle when it lived this long [s]'),
+    'standing_queue': ('[1, 100]', 'a standing vehicle counts when it stands in a queue of this '
+                       'many, one behind the other (1: alone too)'),
     'trim_turn_deg': ('[0, 90]', 'keep the straight run of a trajectory part (0: whole part, '
                       'paper) [deg]'),
     'max_center_dist': ('(min_center_dist, inf]', 'radar / heading observations farther from the '
@@ -284,6 +290,9 @@ class TopologyConfig:
     min_part_points: int = 3
     min_part_length: float = 5.0
     min_track_speed: float = 3.0
+    standing_weight: float = 0.0
+    standing_min_s: float = 3.0
+    standing_queue: int = 2
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0
     part_outside: float = 12.0
@@ -452,7 +461,8 @@ PREPROCESS_FIELDS = (
     'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
-    'min_part_length', 'min_track_speed', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
+    'min_part_length', 'min_track_speed',
+    'standing_weight', 'standing_min_s', 'standing_queue', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
     'track_radius', 'trim_longest', 'arm_reach', 'part_outside', 'part_piece_m', 'bend_min_deg',
     'bend_bin')
 

@@ -30,13 +30,14 @@ from ..observations import Detections
 from .bend import straighten
 from .config import PreprocessConfig
 from .likelihood import ObservationSet
+from .standing import standing_observations
 from .state import wrap
 from .voxels import (RAYS, arm_voxel_set, assign_arms, radar_frame, radar_voxels,
                      ray_voxel_set, voxelise)
 
 __all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations', 'RadarRows',
            'radar_rows', 'radar_filter', 'heading_observations', 'preprocess', 'split_tracks',
-           'moving_tracks', 'unit_vectors']
+           'moving_tracks', 'track_bounds', 'moving_mask', 'unit_vectors']
 
 
 def unit_vectors(vx, vy):
@@ -52,11 +53,14 @@ def _direction_class(x, y, hx, hy, center):
 
 
 def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
-                         arm_angles=None) -> ObservationSet:
+                         arm_angles=None, bounds=None) -> ObservationSet:
     """Split trajectories at the point closest to ``center``; mean point + direction.
     With ``arm_angles`` and ``bend_min_deg > 0`` the rows of bent approaches are first
-    straightened along their arms (:mod:`.bend`, beyond the paper)."""
-    order, starts, ends = moving_tracks(dets, dets.track_id >= 0, cfg.min_track_speed)
+    straightened along their arms (:mod:`.bend`, beyond the paper). ``bounds``:
+    :func:`track_bounds` of the tracked rows when at hand."""
+    order, starts, ends = bounds if bounds is not None else track_bounds(dets, dets.track_id >= 0)
+    moving = moving_mask(dets, order, starts, cfg.min_track_speed)
+    starts, ends = starts[moving], ends[moving]
     if len(starts) == 0:
         return ObservationSet.empty()
     tid, xy, hd, lab = (dets.track_id[order], dets.xy[order], dets.heading[order],
@@ -107,21 +111,42 @@ def _part_sigma(track_label, part_track, cfg: PreprocessConfig) -> np.ndarray:
     return sig
 
 
-def moving_tracks(dets: Detections, sel: np.ndarray, min_speed: float):
+def track_bounds(dets: Detections, sel: np.ndarray):
     """``(order, starts, ends)``: the rows ``sel`` of ``dets`` sorted by track id and time
-    (indices into ``dets``) and the bounds in ``order`` of each track that is not static:
-    with ``min_speed > 0`` and speeds known, a track never faster than ``min_speed`` is a
-    false track of static clutter and has no bounds."""
+    (indices into ``dets``) and the bounds in ``order`` of each track."""
     idx = np.flatnonzero(sel)
     order = idx[np.lexsort((dets.t[idx], dets.track_id[idx]))]
-    tid, sp = dets.track_id[order], dets.speed[order]
+    tid = dets.track_id[order]
     starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]]) if len(tid) else np.zeros(0, np.int64)
-    ends = np.r_[starts[1:], len(tid)].astype(np.int64)
-    if min_speed > 0 and np.isfinite(sp).any():
-        vmax = np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), starts)
-        moving = vmax >= min_speed
-        starts, ends = starts[moving], ends[moving]
-    return order, starts, ends
+    return order, starts, np.r_[starts[1:], len(tid)].astype(np.int64)
+
+
+def moving_mask(dets: Detections, order, starts, min_speed: float) -> np.ndarray:
+    """Per track of :func:`track_bounds`: is it not static? With ``min_speed > 0`` and
+    speeds known, a track never faster than ``min_speed`` is static: a false track of
+    static clutter or a standing vehicle (:mod:`.standing`)."""
+    sp = dets.speed[order]
+    if min_speed <= 0 or not np.isfinite(sp).any() or len(starts) == 0:
+        return np.ones(len(starts), bool)
+    return np.maximum.reduceat(np.where(np.isfinite(sp), sp, np.inf), starts) >= min_speed
+
+
+def moving_tracks(dets: Detections, sel: np.ndarray, min_speed: float):
+    """``(order, starts, ends)`` of :func:`track_bounds` for the tracks that are not static
+    (:func:`moving_mask`)."""
+    order, starts, ends = track_bounds(dets, sel)
+    moving = moving_mask(dets, order, starts, min_speed)
+    return order, starts[moving], ends[moving]
+
+
+def _standing(dets: Detections, center, cfg: PreprocessConfig, bounds=None) -> ObservationSet:
+    """The tracks that :func:`moving_mask` finds static, as standing vehicles
+    (:mod:`.standing`); ``bounds``: :func:`track_bounds` of the tracked rows when at hand."""
+    if cfg.standing_weight <= 0 or not (dets.track_id >= 0).any():
+        return ObservationSet.empty()
+    order, starts, ends = bounds if bounds is not None else track_bounds(dets, dets.track_id >= 0)
+    still = ~moving_mask(dets, order, starts, cfg.min_track_speed)
+    return standing_observations(dets, center, order, starts, ends, still, cfg)
 
 
 def _rows_within(c, radius: float, starts, ends, tid, xy, hd, lab):
@@ -307,7 +332,9 @@ def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
     """All observation kinds of ``dets`` for the current ``center`` (paper §II-A);
     ``radar``: :func:`radar_rows` of ``dets.finite()`` when already at hand."""
     dets = dets.finite()
-    return ObservationSet.concat([tracked_observations(dets, center, cfg, arm_angles),
+    bounds = track_bounds(dets, dets.track_id >= 0)
+    return ObservationSet.concat([tracked_observations(dets, center, cfg, arm_angles, bounds),
+                                  _standing(dets, center, cfg, bounds),
                                   radar_observations(dets, center, cfg, arm_angles, radar),
                                   heading_observations(dets, center, cfg, arm_angles)])
 
