@@ -290,7 +290,7 @@ class TopologyConfig:
     min_part_points: int = 3
     min_part_length: float = 5.0
     min_track_speed: float = 3.0
-    standing_weight: float = 0.0
+    standing_weight: float = 1.0
     standing_min_s: float = 3.0
     standing_queue: int = 2
     trim_turn_deg: float = 15.0

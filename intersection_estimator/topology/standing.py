@@ -61,9 +61,9 @@ def standing_tracks(dets: Detections, order, starts, ends, still, min_s: float):
 #: two standing vehicles are neighbours in a queue when one stands behind the other on its
 #: line: within this much across [m] ...
 QUEUE_LATERAL_M = 1.5
-#: ... this far apart along it [m] (a car length and a gap; two queued cars' centers
-#: stand 6-10 m apart) ...
-QUEUE_GAP_M = (3.0, 15.0)
+#: ... this far apart along it [m]: a car length and a standstill gap (two parked cars 13 m
+#: apart on a side street made an arm with 15 m; a truck's neighbour stands farther) ...
+QUEUE_GAP_M = (4.0, 10.0)
 #: ... and heading the same way within this [deg]
 QUEUE_HEADING_DEG = 20.0
 

@@ -54,8 +54,9 @@ def test_a_standing_queue_becomes_weak_entering_observations():
     lane = np.array([_lane_point(GT, GT.arms[QUEUE_ARM], ENTERING, 0, 14.0 + 8.0 * k)
                      for k in range(5)])
     assert np.abs(np.stack([obs.x, obs.y], 1) - lane).max() < 0.5
-    # off by default, and a moving id is not standing
-    assert len(_obs(dets, PreprocessConfig())) == 0
+    # on by default, off with weight 0, and a moving id is not standing
+    assert len(_obs(dets, PreprocessConfig())) == 5
+    assert len(_obs(dets, replace(CFG, standing_weight=0.0))) == 0
     assert len(_obs(dets, moving=[500, 501])) == 3
     # the speed test of the trajectory parts finds them static
     order, starts, _ = track_bounds(dets, dets.track_id >= 0)
