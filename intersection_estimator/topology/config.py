@@ -461,10 +461,9 @@ PREPROCESS_FIELDS = (
     'voxel_length', 'voxel_width', 'straight_run', 'voxel_merge', 'heading_voxel_merge',
     'heading_sectors', 'passage_gap', 'weight_power', 'weight_scale', 'min_doppler', 'min_rcs',
     'min_rcs_static', 'keep_unknown_direction', 'min_radial_cos', 'min_part_points',
-    'min_part_length', 'min_track_speed',
-    'standing_weight', 'standing_min_s', 'standing_queue', 'trim_turn_deg', 'min_center_dist', 'max_center_dist',
-    'track_radius', 'trim_longest', 'arm_reach', 'part_outside', 'part_piece_m', 'bend_min_deg',
-    'bend_bin')
+    'min_part_length', 'min_track_speed', 'standing_weight', 'standing_min_s', 'standing_queue',
+    'trim_turn_deg', 'min_center_dist', 'max_center_dist', 'track_radius', 'trim_longest',
+    'arm_reach', 'part_outside', 'part_piece_m', 'bend_min_deg', 'bend_bin')
 
 
 def _preprocess_validate(self) -> 'PreprocessConfig':
