@@ -4,9 +4,9 @@ The paper's tracked observations (§II-A) are trajectory parts, and
 :func:`.preprocess.moving_tracks` drops a track that is never fast: static clutter, a parked
 car. A queue at a red light looks the same to a speed test -- in a recording of half a
 minute its vehicles may stand from the first frame to the last -- and an arm whose only
-traffic is such a queue was never found (on SUMO dev 0-199 a third of the wrong arm
-counts). Its vehicles stand on the arm's lanes, heading into the box, so each standing
-track becomes one observation here:
+traffic is such a queue was never found, and one whose few moving vehicles leave it
+thinly supported lost to the arm-count prior. Its vehicles stand on the arm's lanes,
+heading into the box, so each standing track becomes one observation here:
 
 * its mean position and circular-mean heading (orientation known);
 * only a vehicle that faces the box (an entering vehicle: heading towards the center) and
