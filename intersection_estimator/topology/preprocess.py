@@ -53,14 +53,13 @@ def _direction_class(x, y, hx, hy, center):
 
 
 def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
-                         arm_angles=None, bounds=None) -> ObservationSet:
+                         arm_angles=None, moving=None) -> ObservationSet:
     """Split trajectories at the point closest to ``center``; mean point + direction.
     With ``arm_angles`` and ``bend_min_deg > 0`` the rows of bent approaches are first
-    straightened along their arms (:mod:`.bend`, beyond the paper). ``bounds``:
-    :func:`track_bounds` of the tracked rows when at hand."""
-    order, starts, ends = bounds if bounds is not None else track_bounds(dets, dets.track_id >= 0)
-    moving = moving_mask(dets, order, starts, cfg.min_track_speed)
-    starts, ends = starts[moving], ends[moving]
+    straightened along their arms (:mod:`.bend`, beyond the paper). ``moving``:
+    :func:`moving_tracks` of the tracked rows when at hand."""
+    order, starts, ends = (moving if moving is not None else
+                           moving_tracks(dets, dets.track_id >= 0, cfg.min_track_speed))
     if len(starts) == 0:
         return ObservationSet.empty()
     tid, xy, hd, lab = (dets.track_id[order], dets.xy[order], dets.heading[order],
@@ -137,16 +136,6 @@ def moving_tracks(dets: Detections, sel: np.ndarray, min_speed: float):
     order, starts, ends = track_bounds(dets, sel)
     moving = moving_mask(dets, order, starts, min_speed)
     return order, starts[moving], ends[moving]
-
-
-def _standing(dets: Detections, center, cfg: PreprocessConfig, bounds=None) -> ObservationSet:
-    """The tracks that :func:`moving_mask` finds static, as standing vehicles
-    (:mod:`.standing`); ``bounds``: :func:`track_bounds` of the tracked rows when at hand."""
-    if cfg.standing_weight <= 0 or not (dets.track_id >= 0).any():
-        return ObservationSet.empty()
-    order, starts, ends = bounds if bounds is not None else track_bounds(dets, dets.track_id >= 0)
-    still = ~moving_mask(dets, order, starts, cfg.min_track_speed)
-    return standing_observations(dets, center, order, starts, ends, still, cfg)
 
 
 def _rows_within(c, radius: float, starts, ends, tid, xy, hd, lab):
@@ -332,9 +321,12 @@ def preprocess(dets: Detections, center, cfg: PreprocessConfig, arm_angles=None,
     """All observation kinds of ``dets`` for the current ``center`` (paper §II-A);
     ``radar``: :func:`radar_rows` of ``dets.finite()`` when already at hand."""
     dets = dets.finite()
-    bounds = track_bounds(dets, dets.track_id >= 0)
-    return ObservationSet.concat([tracked_observations(dets, center, cfg, arm_angles, bounds),
-                                  _standing(dets, center, cfg, bounds),
+    order, starts, ends = track_bounds(dets, dets.track_id >= 0)   # one sort for both kinds
+    moving = moving_mask(dets, order, starts, cfg.min_track_speed)
+    return ObservationSet.concat([tracked_observations(dets, center, cfg, arm_angles,
+                                                       (order, starts[moving], ends[moving])),
+                                  standing_observations(dets, center, order, starts, ends,
+                                                        ~moving, cfg),
                                   radar_observations(dets, center, cfg, arm_angles, radar),
                                   heading_observations(dets, center, cfg, arm_angles)])
 

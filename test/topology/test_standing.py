@@ -37,6 +37,13 @@ def _queue(rng, tid0=500, n=5):
                       tid0 + k, rng) for k in range(n)]
 
 
+def _driven(inter, rng, per_lane):
+    """Moving tracks (10 m/s, 0.3 m noise) over every lane of ``inter``."""
+    return [Detections.make(xy + rng.normal(0, 0.3, xy.shape), np.arange(len(xy)) * 0.1,
+                            heading=hd, track_id=k, speed=10.0)
+            for k, (xy, hd) in enumerate(trajectories(inter, rng, per_lane))]
+
+
 def _obs(dets, cfg=CFG, moving=()):
     """standing_observations of ``dets`` with the track ids ``moving`` taken as moving."""
     order, starts, ends = track_bounds(dets, dets.track_id >= 0)
@@ -100,11 +107,7 @@ def test_only_vehicles_queued_towards_the_box_count():
 
 def test_preprocess_adds_standing_vehicles_beside_the_trajectory_parts():
     rng = np.random.default_rng(2)
-    paths = trajectories(GT, rng, per_lane=1)
-    moving = [Detections.make(xy + rng.normal(0, 0.3, xy.shape), np.arange(len(xy)) * 0.1,
-                              heading=hd, track_id=k, speed=10.0)
-              for k, (xy, hd) in enumerate(paths)]
-    dets = Detections.concat(moving + _queue(rng))
+    dets = Detections.concat(_driven(GT, rng, per_lane=1) + _queue(rng))
     base = preprocess(dets, GT.center, replace(CFG, standing_weight=0.0))
     more = preprocess(dets, GT.center, CFG)
     assert len(more) == len(base) + 5
@@ -115,11 +118,7 @@ def _without_queue_arm_traffic(rng):
     """GT's traffic with arm QUEUE_ARM driven by nobody, plus a standing queue on it."""
     three = copy.deepcopy(GT)
     del three.arms[QUEUE_ARM]
-    paths = trajectories(three, rng, per_lane=2)
-    moving = [Detections.make(xy + rng.normal(0, 0.3, xy.shape), np.arange(len(xy)) * 0.1,
-                              heading=hd, track_id=k, speed=10.0)
-              for k, (xy, hd) in enumerate(paths)]
-    return Detections.concat(moving + _queue(rng, n=6))
+    return Detections.concat(_driven(three, rng, per_lane=2) + _queue(rng, n=6))
 
 
 def _arm_found(cfg) -> bool:
