@@ -88,6 +88,11 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('radar_track_doppler_tol', 4.0, "radar tracker: a return joins a track only when its "
               "Doppler is within this of the track's velocity along the line of sight [m/s]",
               0.1, 100.0),
+    ParamSpec('radar_track_doppler_noise', 0.5, "radar tracker: standard deviation of one return's "
+              'Doppler about its vehicle\'s radial speed, for the velocity update; 0 = Doppler only gates '
+              'returns and starts tracks [m/s]', 0.0, 10.0),
+    ParamSpec('radar_track_standing_s', 3.0, 'radar tracker: a track that lived this long without '
+              'driving (a queue, a parked car) is reported without a heading; 0 = never [s]', 0.0, 3600.0),
     ParamSpec('radar_track_reorder_s', 0.2, 'radar tracker: scans are held this long (stamp time) and '
               'tracked in stamp order, so that radars with different latencies interleave; a scan later '
               'than this is dropped, counted as radar_scan_late [s]', 0.0, 10.0),
@@ -208,6 +213,8 @@ def pipeline_config(values: dict):
                                          body_along_m=float(values['radar_track_spread_along']),
                                          body_across_m=float(values['radar_track_spread_across']),
                                          doppler_tol=float(values['radar_track_doppler_tol']),
+                                         doppler_var=float(values['radar_track_doppler_noise']) ** 2,
+                                         standing_s=float(values['radar_track_standing_s']),
                                          reorder_s=float(values['radar_track_reorder_s'])))
     cfg.validate()
     return cfg

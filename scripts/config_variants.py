@@ -4,8 +4,8 @@
         --variant base: --variant r50:topology.max_center_dist=50
 
 Each case is made once (``bench.make_case``) and estimated with every variant's overrides
-(``name:section.key=value,...``, a tuple as ``6+7``; sections ``topology`` (TopologyConfig) and ``lanes``
-(LaneConfig)); the pooled metrics of each variant are printed (``evaluate.aggregate``) and,
+(``name:section.key=value,...``, a tuple as ``6+7``; sections ``topology`` (TopologyConfig), ``lanes``
+(LaneConfig) and ``tracker`` (TrackerConfig, the radar tracker of raw windows)); the pooled metrics of each variant are printed (``evaluate.aggregate``) and,
 with ``--json``, written with the per-case metrics.
 """
 
@@ -22,11 +22,12 @@ from intersection_estimator.evaluate import aggregate, evaluate
 from intersection_estimator.lanes import LaneConfig
 from intersection_estimator.pipeline import estimate
 from intersection_estimator.topology import TopologyConfig
+from intersection_estimator.tracking import TrackerConfig
 
 KEYS = ('arm_accuracy', 'topology_accuracy', 'topology_observed_accuracy', 'center_error_m_mean',
         'lane_error_cm_mean', 'floor_cm_mean', 'lane_error_cm_mean_entering',
         'lane_error_cm_mean_leaving', 'lane_error_cm_mean_connector', 'lane_recall', 'lane_precision')
-SECTIONS = {'topology': TopologyConfig, 'lanes': LaneConfig}
+SECTIONS = {'topology': TopologyConfig, 'lanes': LaneConfig, 'tracker': TrackerConfig}
 
 
 def _typed(old, text: str):
@@ -38,7 +39,8 @@ def _typed(old, text: str):
 
 
 def variant(text: str) -> tuple[str, dict]:
-    """'name:topology.k=v,lanes.k=v' -> (name, {'topology_config': ..., 'lane_config': ...})."""
+    """'name:topology.k=v,lanes.k=v' -> (name, {'topology_config': ..., 'lane_config': ...,
+    'tracker_config': ...})."""
     name, _, kv = text.partition(':')
     cfgs = {s: cls() for s, cls in SECTIONS.items()}
     for item in filter(None, kv.split(',')):
@@ -47,7 +49,8 @@ def variant(text: str) -> tuple[str, dict]:
         if section not in cfgs or not hasattr(cfgs[section], field):
             raise SystemExit(f'config_variants: unknown setting {key!r} (sections: {", ".join(SECTIONS)})')
         cfgs[section] = replace(cfgs[section], **{field: _typed(getattr(cfgs[section], field), v)})
-    return name, {'topology_config': cfgs['topology'].validate(), 'lane_config': cfgs['lanes'].validate()}
+    return name, {'topology_config': cfgs['topology'].validate(), 'lane_config': cfgs['lanes'].validate(),
+                  'tracker_config': cfgs['tracker'].validate()}
 
 
 def main(argv=None) -> int:

@@ -6,6 +6,7 @@ import pytest
 
 from conftest import ROOT
 from intersection_estimator import params as P
+from intersection_estimator.tracking import TrackerConfig
 
 
 def test_defaults_are_valid_and_match_the_shipped_yaml():
@@ -59,7 +60,11 @@ def test_weak_labels_reach_the_topology_and_bad_ones_are_refused():
 
 def test_radar_tracker_parameters_reach_the_pipeline():
     cfg = P.pipeline_config(dict(P.defaults(), radar_tracking=False, radar_track_spread_along=2.0,
-                                 radar_track_spread_across=1.5, radar_track_doppler_tol=3.0))
+                                 radar_track_spread_across=1.5, radar_track_doppler_tol=3.0,
+                                 radar_track_doppler_noise=0.3, radar_track_standing_s=0.0))
     t = cfg.radar_tracking
     assert (t.enabled, t.body_along_m, t.body_across_m, t.doppler_tol) == (False, 2.0, 1.5, 3.0)
+    assert (t.doppler_var, t.standing_s) == (pytest.approx(0.09), 0.0)
+    d = P.pipeline_config(P.defaults()).radar_tracking
+    assert (d.doppler_var, d.standing_s) == (TrackerConfig().doppler_var, TrackerConfig().standing_s)
     assert P.pipeline_config(P.defaults()).radar_tracking.enabled

@@ -42,8 +42,8 @@ __all__ = ['standing_tracks', 'standing_observations']
 def standing_tracks(dets: Detections, order, starts, ends, still, min_s: float):
     """``(mean xy (n, 2), mean heading unit vectors (n, 2), label (n,))`` of the tracks
     ``still`` (a mask over the bounds ``starts``/``ends`` into ``order``, as
-    :func:`.preprocess.track_bounds` gives them) that lived at least ``min_s`` and carry a
-    heading."""
+    :func:`.preprocess.track_bounds` gives them) that lived at least ``min_s``; a track
+    without a heading (a radar track that never moved, :mod:`..tracking`) gets NaN."""
     if len(starts) == 0 or not still.any():
         return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, np.int64)
     t, xy, h = dets.t[order], dets.xy[order], dets.heading[order]
@@ -53,9 +53,10 @@ def standing_tracks(dets: Detections, order, starts, ends, still, min_s: float):
     hv = np.stack([np.add.reduceat(np.where(ok, np.cos(h), 0.0), starts),
                    np.add.reduceat(np.where(ok, np.sin(h), 0.0), starts)], 1)
     norm = np.hypot(hv[:, 0], hv[:, 1])
-    keep = still & (t[ends - 1] - t[starts] >= min_s) & (norm > 1e-9)
-    return (mean[keep], hv[keep] / norm[keep, None],
-            dets.label[order[starts[keep]]].astype(np.int64))
+    keep = still & (t[ends - 1] - t[starts] >= min_s)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        hv = np.where((norm > 1e-9)[:, None], hv / norm[:, None], np.nan)
+    return mean[keep], hv[keep], dets.label[order[starts[keep]]].astype(np.int64)
 
 
 #: two standing vehicles are neighbours in a queue when one stands behind the other on its
@@ -97,6 +98,10 @@ def standing_observations(dets: Detections, center, order, starts, ends, still,
     on = (r >= cfg.part_outside) & (r <= cfg.track_radius)
     if len(cfg.weak_labels):
         on &= ~np.isin(label, np.asarray(cfg.weak_labels, np.int64))
+    headless = ~np.isfinite(hv[:, 0])
+    if headless.any():                    # faces the box: the queue rule alone decides
+        to_c = c - xy[headless]
+        hv[headless] = to_c / np.maximum(np.hypot(to_c[:, 0], to_c[:, 1]), 1e-9)[:, None]
     facing = hv[:, 0] * (c[0] - xy[:, 0]) + hv[:, 1] * (c[1] - xy[:, 1]) > 0
     xy, hv = xy[on & facing], hv[on & facing]
     xy, hv = _in_queues(xy, hv, cfg.standing_queue)

@@ -16,12 +16,18 @@ _RANGES = {
     'max_miss': ('[1, 1000]', 'scans without rows before a track ends'),
     'min_rows': ('[0, 100000]', 'updates (rows) before a track is reported'),
     'min_path_m': ('[0, 1000]', 'first-to-last distance of a reported track [m]'),
+    'standing_s': ('[0, 3600]', 'a track that lived this long [s of stamp time] without driving '
+                   '(min_path_m) is reported headless (a queue, a parked car; 0: never)'),
     'accel_noise': ('(0, 1000]', 'white-acceleration density of the constant-velocity model [m^2/s^3]'),
     'body_along_m': ('(0, 20]', "spread of one radar row along the vehicle's heading [m]"),
     'body_across_m': ('(0, 20]', 'spread of one radar row across the heading [m]'),
     'row_var': ('(0, 100]', 'variance of one row about the vehicle center in the update [m^2]'),
+    'doppler_var': ('[0, 100]', "variance of one row's Doppler in the update [(m/s)^2]; 0: "
+                    'Doppler gates and starts tracks only'),
     'velocity_sigma0': ('(0, 100]', 'velocity uncertainty of a new track [m/s]'),
-    'min_speed': ('[0, 50]', 'below this a row keeps the track\'s last heading [m/s]'),
+    'min_speed': ('[0, 50]', 'below this a track stands: speed 0, and it has not moved [m/s]'),
+    'heading_speed': ('[0, 50]', "below this a row keeps the heading the track last drove at this "
+                      "speed or faster (min_speed at least) [m/s]"),
     'merge_gates': ('[0, 20]', 'two tracks this many gates apart, same velocity: the younger ends'),
     'merge_speed': ('[0, 50]', '... velocities within this [m/s]'),
     'max_backlog': ('[1, 1000000]', 'rows a track holds before it is reported (memory cap)'),
@@ -44,12 +50,15 @@ class TrackerConfig:
     max_miss: int = 5
     min_rows: int = 20
     min_path_m: float = 10.0
+    standing_s: float = 3.0
     accel_noise: float = 2.0
     body_along_m: float = 1.64     # 4.5 m body (uniform: 1.3 m) and 1 m noise
     body_across_m: float = 1.13    # 1.8 m body (0.52 m) and 1 m noise
     row_var: float = 2.0
+    doppler_var: float = 0.25      # 0.5 m/s: a radar's ~0.1 m/s and the body's spread of speeds
     velocity_sigma0: float = 3.0
     min_speed: float = 1.0
+    heading_speed: float = 3.0
     merge_gates: float = 0.5
     merge_speed: float = 2.0
     max_backlog: int = 600         # 60 s of a parked car at 10 Hz

@@ -2,7 +2,10 @@
 
 State ``x = (px, py, vx, vy)``; white acceleration of density ``q`` (Bar-Shalom, Li and
 Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001, §6.3.2);
-a measurement is the mean position of the rows a track took in one scan.
+a measurement is the mean position of the rows a track took in one scan and, where they
+carry Doppler, their mean Doppler: the velocity along their mean line of sight
+(:func:`update_radial`; linear in the state, since the mean of ``<v, los_i>`` is
+``<v, mean los_i>``).
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ from __future__ import annotations
 from numba import njit
 import numpy as np
 
-__all__ = ['transition', 'predict', 'update', 'rts']
+__all__ = ['transition', 'predict', 'update', 'update_radial', 'rts']
 
 
 def transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -41,6 +44,18 @@ def update(x: np.ndarray, P: np.ndarray, z: np.ndarray, r: float):
     e0, e1 = z[0] - x[0], z[1] - x[1]
     x2 = x + K[:, 0] * e0 + K[:, 1] * e1
     P2 = P - K[:, 0:1] * P[0:1, :] - K[:, 1:2] * P[1:2, :]
+    return x2, P2
+
+
+@njit(cache=True)
+def update_radial(x: np.ndarray, P: np.ndarray, los: np.ndarray, dop: float, r: float):
+    """Kalman update with a scalar measurement ``dop = <(vx, vy), los> + noise`` of
+    variance ``r`` (a radar's Doppler, ego-motion compensated)."""
+    ph = P[:, 2] * los[0] + P[:, 3] * los[1]             # P h^T
+    s = ph[2] * los[0] + ph[3] * los[1] + r
+    K = ph / s
+    x2 = x + K * (dop - (x[2] * los[0] + x[3] * los[1]))
+    P2 = P - np.outer(K, ph)
     return x2, P2
 
 

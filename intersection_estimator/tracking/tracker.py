@@ -2,13 +2,18 @@
 
 Per scan (one stamp), rows that survive the radar clutter filter go to the track whose
 gate (:func:`.gating.gate_distance`) they are nearest, inside one gate; a track is updated
-with the mean of its rows (:func:`.kalman.update`, variance ``row_var`` / rows). Rows
+with the mean of its rows (:func:`.kalman.update`, variance ``row_var`` / rows) and their
+mean Doppler (:func:`.kalman.update_radial`, variance ``doppler_var`` / rows). Rows
 farther than ``spawn_gates`` from every track are clustered (single linkage within
 ``cluster_m``) and each cluster starts a track whose velocity is its Doppler along the line
 of sight. Two tracks on one vehicle: the younger ends (:func:`.gating.duplicates`). A
 track ends after ``max_miss`` scans without rows and is reported once it has ``min_rows``
 updates (one row each), ``min_path_m`` between its first and last position and has moved
-(``min_speed``); while it stands its rows keep the heading it last drove.
+(``min_speed``); while it stands or creeps (below ``heading_speed``) its rows keep the
+heading it last drove. A track that has lived ``standing_s`` without driving (a queue at
+a red light, which creeps; a parked car) is reported too, headless and at speed 0 until it
+drives: radar cannot tell which way a vehicle faces that never moved, and the topology
+step reads such tracks as queues only (:mod:`..topology.standing`).
 
 Online (:meth:`RadarTracker.feed`) a track's rows are filtered states, handed out when
 the track is reported and then scan by scan; in a batch (:func:`track_radar`) every
@@ -36,7 +41,7 @@ from scipy.spatial import cKDTree
 from ..observations import Detections
 from .config import TrackerConfig
 from .gating import duplicates, gate_distance
-from .kalman import predict, rts, transition, update
+from .kalman import predict, rts, transition, update, update_radial
 
 __all__ = ['RADAR_TRACK_ID0', 'RadarTracker', 'track_radar', 'radar_rows_of', 'is_radar_track']
 
@@ -70,7 +75,8 @@ class _Track:
     """One track: filter state, counters, and its updates (t, predicted and filtered
     state and covariance) since the last rows handed out."""
 
-    __slots__ = ('x', 'P', 'hits', 'miss', 'id', 'hist', 'start', 'moved', 'heading', 'reported')
+    __slots__ = ('x', 'P', 'hits', 'miss', 'id', 'hist', 'start', 'moved', 'heading', 'reported',
+                 't0', 't')
 
     def __init__(self, z, v, tid: int, t: float, cfg: TrackerConfig):
         self.x = np.array([z[0], z[1], v[0], v[1]])
@@ -83,11 +89,21 @@ class _Track:
         self.moved = False
         self.heading = math.nan
         self.reported = False
+        self.t0 = self.t = t
+
+    def drives(self, cfg: TrackerConfig) -> bool:
+        """Has the track driven: moved (``min_speed``) and ``min_path_m`` from its start?"""
+        return (self.hits >= cfg.min_rows and self.moved
+                and float(np.hypot(*(self.x[:2] - self.start))) >= cfg.min_path_m)
+
+    def stands(self, cfg: TrackerConfig) -> bool:
+        """Has the track lived ``standing_s`` without driving (a queue creeps)?"""
+        return (cfg.standing_s > 0 and self.hits >= cfg.min_rows
+                and self.t - self.t0 >= cfg.standing_s and not self.drives(cfg))
 
     def passes(self, cfg: TrackerConfig) -> bool:
         """Is the track reported (its rows handed out)?"""
-        return (self.hits >= cfg.min_rows and self.moved
-                and float(np.hypot(*(self.x[:2] - self.start))) >= cfg.min_path_m)
+        return self.drives(cfg) or self.stands(cfg)
 
 
 class RadarTracker:
@@ -122,7 +138,7 @@ class RadarTracker:
         owner, near = self._associate(xy, doppler, los)
         for i in np.unique(owner[owner >= 0]):
             sel = owner == i
-            self._update(self.live[i], xy[sel].mean(0), int(sel.sum()), t)
+            self._update(self.live[i], xy[sel].mean(0), int(sel.sum()), t, los[sel], doppler[sel])
         self._end_duplicates()
         for tr in self.live:
             tr.miss += 1
@@ -188,16 +204,31 @@ class RadarTracker:
         dmin = d[best, np.arange(n)]
         return np.where(dmin <= 1.0, best, -1), dmin <= self.cfg.spawn_gates
 
-    def _update(self, tr: _Track, z, k: int, t: float) -> None:
+    def _update(self, tr: _Track, z, k: int, t: float, los, doppler) -> None:
         xp, Pp = tr.x.copy(), tr.P.copy()
         tr.x, tr.P = update(tr.x, tr.P, z, self.cfg.row_var / k)
+        self._update_doppler(tr, los, doppler)
         tr.hits += 1
         tr.miss = -1
+        tr.t = t
         tr.hist.append((t, xp, Pp, tr.x.copy(), tr.P.copy()))
         if not self.keep_history and not tr.reported and len(tr.hist) > self.cfg.max_backlog:
             del tr.hist[0]
         if float(np.hypot(tr.x[2], tr.x[3])) >= self.cfg.min_speed:
             tr.moved = True
+
+    def _update_doppler(self, tr: _Track, los, doppler) -> None:
+        """The rows' mean Doppler as a measurement of the velocity along their mean line of
+        sight (:func:`.kalman.update_radial`): it pins a standing vehicle's velocity to zero,
+        where positions alone let a track drift along a queue of vehicles."""
+        ok = np.isfinite(doppler)
+        if self.cfg.doppler_var <= 0 or not ok.any():
+            return
+        u = los[ok].mean(0)
+        if float(np.hypot(u[0], u[1])) < 1e-6:
+            return
+        tr.x, tr.P = update_radial(tr.x, tr.P, u, float(doppler[ok].mean()),
+                                   self.cfg.doppler_var / int(ok.sum()))
 
     def _end_duplicates(self) -> None:
         if len(self.live) < 2:
@@ -243,24 +274,32 @@ class RadarTracker:
                   self.cfg.accel_noise) if smooth else np.array([h[3] for h in tr.hist]))
         if skip:
             t, xs = t[1:], xs[1:]
-        heading, speed = self._held_headings(tr, xs)
+        if tr.drives(self.cfg) or math.isfinite(tr.heading):
+            heading, speed = self._held_headings(tr, xs)
+        else:                                 # stood since it started: no heading yet
+            heading, speed = np.full(len(xs), math.nan), np.zeros(len(xs))
         return Detections.make(xs[:, :2], t, heading=heading, speed=speed,
                                track_id=RADAR_TRACK_ID0 + tr.id, label=0)
 
     def _held_headings(self, tr: _Track, xs: np.ndarray):
-        """Heading of every row: its velocity's while it moves (``min_speed``), else the
-        last one driven (before the first: the first one driven)."""
+        """Heading of every row: its velocity's while it drives at ``heading_speed`` or
+        faster, else the last one driven so (before the first: the first one); speed 0 below
+        ``min_speed``. A velocity's direction is only as good as its speed is large: the
+        Doppler pins the radial speed of a braking vehicle sooner than positions pin the
+        rest, and at 1-3 m/s its direction swung by up to 15 degrees (test_tracker)."""
         sp = np.hypot(xs[:, 2], xs[:, 3])
         h = np.arctan2(xs[:, 3], xs[:, 2])
-        moving = sp >= self.cfg.min_speed
-        idx = np.maximum.accumulate(np.where(moving, np.arange(len(xs)), -1))
-        if moving.any():
-            fill = tr.heading if math.isfinite(tr.heading) else h[np.flatnonzero(moving)[0]]
+        sure = sp >= max(self.cfg.heading_speed, self.cfg.min_speed)
+        if not sure.any() and not math.isfinite(tr.heading):
+            sure = sp >= self.cfg.min_speed           # it never drove faster: the best it has
+        idx = np.maximum.accumulate(np.where(sure, np.arange(len(xs)), -1))
+        if sure.any():
+            fill = tr.heading if math.isfinite(tr.heading) else h[np.flatnonzero(sure)[0]]
             held = np.where(idx >= 0, h[np.maximum(idx, 0)], fill)
             tr.heading = float(held[-1])
         else:
             held = np.full(len(xs), tr.heading)
-        return held, np.where(moving, sp, 0.0)
+        return held, np.where(sp >= self.cfg.min_speed, sp, 0.0)
 
 
 def track_radar(dets: Detections, cfg: TrackerConfig | None = None, clutter=None) -> Detections:

@@ -134,3 +134,22 @@ def test_an_arm_only_a_standing_queue_shows_is_found_with_it_and_missed_without(
     cfg = TopologyConfig(chains_tracked=1)
     assert not _arm_found(replace(cfg, standing_weight=0.0))
     assert _arm_found(replace(cfg, standing_weight=1.0))
+
+
+def test_headless_standing_tracks_face_the_box_and_queue_on_its_radial_lines():
+    """A radar track that never moved has no heading (tracking/tracker.py): it is taken to
+    face the box, so a queue of them on an arm counts, heading along the arm into the box;
+    a lone one and a row across the arm (a line of cars that are not one behind the other
+    towards the box) do not."""
+    rng = np.random.default_rng(6)
+    arm = GT.arms[QUEUE_ARM]
+    headless = [replace(d, heading=np.full(len(d), np.nan)) for d in _queue(rng)]
+    obs = _obs(Detections.concat(headless))
+    assert len(obs) == 5 and np.all(obs.has_o) and np.all(obs.d == 1.0)
+    into = np.array([math.cos(arm.angle + math.pi), math.sin(arm.angle + math.pi)])
+    assert (obs.hx * into[0] + obs.hy * into[1]).min() > math.cos(math.radians(10))
+    assert len(_obs(Detections.concat(headless[:1]))) == 0
+    u = np.array([math.cos(arm.angle), math.sin(arm.angle)])
+    across = [_standing(GT.center + 30.0 * u + np.array([-u[1], u[0]]) * (7.0 * k - 7.0),
+                        np.nan, 600 + k, rng) for k in range(3)]
+    assert len(_obs(Detections.concat(across))) == 0

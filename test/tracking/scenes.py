@@ -20,6 +20,23 @@ def straight(p0, v, t0: float, t1: float):
     return at
 
 
+def polyline(points, speed: float, t0: float):
+    """A vehicle along the polyline ``points`` at ``speed`` from ``t0`` until its end."""
+    p = np.asarray(points, float)
+    seg = np.diff(p, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    cum = np.r_[0.0, np.cumsum(length)]
+
+    def at(t):
+        s = (t - t0) * speed
+        if s < 0 or s > cum[-1]:
+            return None
+        k = min(int(np.searchsorted(cum, s, 'right')) - 1, len(length) - 1)
+        u = seg[k] / length[k]
+        return p[k] + u * (s - cum[k]), u * speed
+    return at
+
+
 def stop_and_go(p0, v, t_stop: float, t_go: float, t1: float, accel: float = 3.0):
     """Drives along ``v``, brakes at ``accel`` to stand at ``t_stop``, stands until
     ``t_go``, then speeds up at ``accel`` to its old speed, until ``t1``."""

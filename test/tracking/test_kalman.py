@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given, settings, strategies as st
 import numpy as np
 
-from intersection_estimator.tracking.kalman import predict, rts, transition, update
+from intersection_estimator.tracking.kalman import predict, rts, transition, update, update_radial
 
 
 def test_transitions_compose():
@@ -66,3 +66,28 @@ def test_the_compiled_update_is_the_kalman_update(seed, r):
     x2, P2 = update(x, P, z, r)
     assert np.allclose(x2, x + K @ (z - H @ x), rtol=1e-9, atol=1e-9)
     assert np.allclose(P2, (np.eye(4) - K @ H) @ P, rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.001, 10.0), st.floats(-3.14, 3.14))
+def test_the_doppler_update_is_the_kalman_update_of_the_radial_speed(seed, r, a):
+    """h = (0, 0, cos a, sin a): K = P h' / (h P h' + r) against the compiled update."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(4, 4))
+    P = A @ A.T + 0.1 * np.eye(4)
+    x, dop = rng.normal(size=4), float(rng.normal())
+    h = np.array([0.0, 0.0, np.cos(a), np.sin(a)])
+    K = P @ h / (h @ P @ h + r)
+    x2, P2 = update_radial(x, P, h[2:].copy(), dop, r)
+    assert np.allclose(x2, x + K * (dop - h @ x), rtol=1e-9, atol=1e-9)
+    assert np.allclose(P2, P - np.outer(K, h @ P), rtol=1e-9, atol=1e-9)
+
+
+def test_zero_doppler_pins_the_radial_speed_and_leaves_the_cross_speed():
+    """A track drifting at 2 m/s along x, measured standing along x: its x speed goes to
+    ~0, its uncertain y speed stays where it was (no correlation to move it)."""
+    x = np.array([0.0, 0.0, 2.0, 1.0])
+    P = np.diag([0.5, 0.5, 4.0, 4.0])
+    for _ in range(20):
+        x, P = update_radial(x, P, np.array([1.0, 0.0]), 0.0, 0.01)
+    assert abs(x[2]) < 0.05 and x[3] == 1.0 and P[2, 2] < 0.01 and P[3, 3] == 4.0

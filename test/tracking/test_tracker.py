@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 
 from intersection_estimator.observations import Detections
-from intersection_estimator.pipeline import OnlineEstimator, PipelineConfig, radar_tracked
+from intersection_estimator.pipeline import OnlineEstimator, PipelineConfig, estimate, radar_tracked
 from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.tracking import RADAR_TRACK_ID0, RadarTracker, TrackerConfig, track_radar
 from intersection_estimator.tracking.tracker import MAX_HELD
 
-from .scenes import scans, stop_and_go, straight
+from .scenes import polyline, scans, stop_and_go, straight
 
 
 def _crossing(rng, clutter=0.0):
@@ -216,13 +217,88 @@ def test_rows_without_a_sensor_position_are_tracked_without_the_doppler():
 
 
 def test_online_a_parked_car_holds_at_most_max_backlog_updates():
-    """A standing object is never reported (it never moved); online its track keeps only the
-    newest ``max_backlog`` updates, so memory stays bounded however long it stands."""
+    """With standing reports off (``standing_s`` 0) a standing object is never reported (it
+    never drove); online its track keeps only the newest ``max_backlog`` updates, so memory
+    stays bounded however long it stands."""
     parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 30.0)
     dets = scans([parked], 30.0, np.random.default_rng(10))
-    tracker = RadarTracker(dataclasses.replace(TrackerConfig(), max_backlog=40))
+    tracker = RadarTracker(dataclasses.replace(TrackerConfig(), max_backlog=40, standing_s=0.0))
     for t in np.unique(dets.t):
         m = dets.t == t
         assert len(tracker.step(float(t), dets.xy[m], dets.doppler[m], dets.sensor_xy[m])) == 0
     assert len(tracker.live) == 1 and tracker.live[0].hits > 250
     assert len(tracker.live[0].hist) <= 40
+
+
+def test_a_vehicle_that_stands_through_is_reported_headless_once_it_stood_standing_s():
+    """A parked car (or a queue's vehicle) that never drove: after ``standing_s`` of stamp
+    time its rows are handed out online, backlog first, with no heading (radar cannot tell
+    which way it faces) and speed 0; the batch reports the same track; memory stays bounded."""
+    parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 30.0)
+    dets = scans([parked], 30.0, np.random.default_rng(10))
+    cfg = dataclasses.replace(TrackerConfig(), standing_s=4.0)
+    tracker = RadarTracker(cfg)
+    out = []
+    for t in np.unique(dets.t):
+        m = dets.t == t
+        got = tracker.step(float(t), dets.xy[m], dets.doppler[m], dets.sensor_xy[m])
+        if len(got):
+            out.append(got)
+        assert len(tracker.live[0].hist) <= max(cfg.min_rows, 41)
+    rows = Detections.concat(out)
+    # the backlog at 4 s (from the first update after the spawning scan), then scan by scan
+    assert out[0].t.min() == 0.1 and out[0].t.max() >= cfg.standing_s
+    assert len(np.unique(rows.t)) == len(rows) == len(np.unique(dets.t)) - 1
+    assert np.isnan(rows.heading).all() and (rows.speed == 0).all()
+    assert np.linalg.norm(rows.xy - [10.0, 5.0], axis=1).max() < 2.0
+    batch = track_radar(dets, cfg)
+    assert len(np.unique(batch.track_id)) == 1 and np.isnan(batch.heading).all()
+
+
+def test_a_short_stand_is_not_reported():
+    """A vehicle seen standing for less than ``standing_s`` gives no track."""
+    parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 2.5)
+    assert len(track_radar(scans([parked], 2.5, np.random.default_rng(11)))) == 0
+
+
+def test_doppler_keeps_the_tracks_of_a_standing_queue_in_place():
+    """Five cars 7 m apart stand in a queue through 20 s: each is one track that stays
+    within a metre of its car (the Doppler update pins its velocity; without it tracks
+    slide along the queue's rows)."""
+    cars = [straight((-10.0 - 7.0 * k, 3.0), (0.0, 0.0), 0.0, 20.0) for k in range(5)]
+    dets = scans(cars, 20.0, np.random.default_rng(12))
+    tracks = track_radar(dets)
+    ids = np.unique(tracks.track_id)
+    assert len(ids) == 5 and (tracks.speed == 0).all()
+    for i in ids:
+        xy = tracks.xy[tracks.track_id == i]
+        car = np.array([-10.0 - 7.0 * round((-10.0 - xy[:, 0].mean()) / 7.0), 3.0])
+        assert np.linalg.norm(xy - car, axis=1).max() < 1.0
+
+
+def _t_junction_and_a_queue(rng):
+    """Radar of 30 s: an east-west road driven both ways, traffic from the south turning
+    right onto it, and on the north arm only a queue of five cars that stand throughout
+    (right-hand traffic: on its entering lane, 12-40 m out)."""
+    v = []
+    for k in range(6):
+        v.append(polyline([(-70, -1.75), (70, -1.75)], 10.0, 4.0 * k))
+        v.append(polyline([(70, 1.75), (-70, 1.75)], 10.0, 2.0 + 4.0 * k))
+        v.append(polyline([(1.75, -70), (1.75, -6), (6, -1.75), (70, -1.75)], 9.0, 1.0 + 4.5 * k))
+    v += [straight((-1.75, 12.0 + 7.0 * k), (0.0, 0.0), 0.0, 30.0) for k in range(5)]
+    return scans(v, 30.0, rng)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_an_arm_only_a_standing_radar_queue_shows_is_found_through_the_tracker(seed):
+    """End to end in raw mode: the queue's tracks are reported headless after
+    ``standing_s`` and the topology step reads them as a queue (topology/standing.py), so
+    the north arm is found; with standing reports off it is not."""
+    dets = _t_junction_and_a_queue(np.random.default_rng(seed))
+
+    def north(cfg):
+        inter = estimate(dets, mode='raw', topology_samples=2000, lane_samples=0, seed=seed,
+                         tracker_config=cfg).intersection
+        return any(abs(a.angle - math.pi / 2) < math.radians(15) for a in inter.arms)
+    assert north(TrackerConfig())
+    assert not north(dataclasses.replace(TrackerConfig(), standing_s=0.0))
