@@ -55,7 +55,7 @@ class TrackerConfig:
     body_along_m: float = 1.64     # 4.5 m body (uniform: 1.3 m) and 1 m noise
     body_across_m: float = 1.13    # 1.8 m body (0.52 m) and 1 m noise
     row_var: float = 2.0
-    doppler_var: float = 1.0       # 1 m/s: a radar's ~0.1 m/s, the spread of speeds over a body, rows of a neighbour
+    doppler_var: float = 0.0       # off: on SUMO radar it helps, on Table I it costs (docs/real_junctions.md)
     velocity_sigma0: float = 3.0
     min_speed: float = 1.0
     heading_speed: float = 3.0

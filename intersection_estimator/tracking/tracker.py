@@ -284,9 +284,9 @@ class RadarTracker:
     def _held_headings(self, tr: _Track, xs: np.ndarray):
         """Heading of every row: its velocity's while it drives at ``heading_speed`` or
         faster, else the last one driven so (before the first: the first one); speed 0 below
-        ``min_speed``. A velocity's direction is only as good as its speed is large: the
-        Doppler pins the radial speed of a braking vehicle sooner than positions pin the
-        rest, and at 1-3 m/s its direction swung by up to 15 degrees (test_tracker)."""
+        ``min_speed``. A velocity's direction is only as good as its speed is large: a
+        braking vehicle's swung by up to 20 degrees at 1-3 m/s, more with the Doppler update,
+        which pins the radial speed sooner than positions pin the rest (test_tracker)."""
         sp = np.hypot(xs[:, 2], xs[:, 3])
         h = np.arctan2(xs[:, 3], xs[:, 2])
         sure = sp >= max(self.cfg.heading_speed, self.cfg.min_speed)

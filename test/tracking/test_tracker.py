@@ -261,13 +261,13 @@ def test_a_short_stand_is_not_reported():
     assert len(track_radar(scans([parked], 2.5, np.random.default_rng(11)))) == 0
 
 
-def test_doppler_keeps_the_tracks_of_a_standing_queue_in_place():
-    """Five cars 7 m apart stand in a queue through 20 s: each is one track that stays
-    within a metre of its car (the Doppler update pins its velocity; without it tracks
-    slide along the queue's rows)."""
+@pytest.mark.parametrize('doppler_var', [0.0, 1.0])
+def test_the_tracks_of_a_standing_queue_stay_in_place(doppler_var):
+    """Five cars 7 m apart stand in a queue through 20 s: each is one headless track at
+    speed 0 that stays within a metre of its car, with and without the Doppler update."""
     cars = [straight((-10.0 - 7.0 * k, 3.0), (0.0, 0.0), 0.0, 20.0) for k in range(5)]
     dets = scans(cars, 20.0, np.random.default_rng(12))
-    tracks = track_radar(dets)
+    tracks = track_radar(dets, dataclasses.replace(TrackerConfig(), doppler_var=doppler_var))
     ids = np.unique(tracks.track_id)
     assert len(ids) == 5 and (tracks.speed == 0).all()
     for i in ids:
