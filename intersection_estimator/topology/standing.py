@@ -8,7 +8,9 @@ traffic is such a queue was never found, and one whose few moving vehicles leave
 thinly supported lost to the arm-count prior. Its vehicles stand on the arm's lanes,
 heading into the box, so each standing track becomes one observation here:
 
-* its mean position and circular-mean heading (orientation known);
+* its mean position and circular-mean heading (orientation known); a track without a
+  heading -- the radar tracker reports a vehicle that never drove so (:mod:`..tracking`) --
+  is taken to face the box, and the queue rule alone decides;
 * only a vehicle that faces the box (an entering vehicle: heading towards the center) and
   stands in a queue of at least ``standing_queue`` standing vehicles one behind the other
   on a line (:func:`_in_queues`: neighbours within ``QUEUE_LATERAL_M`` across,
