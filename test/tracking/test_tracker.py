@@ -14,7 +14,7 @@ from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.tracking import RADAR_TRACK_ID0, RadarTracker, TrackerConfig, track_radar
 from intersection_estimator.tracking.tracker import MAX_HELD
 
-from .scenes import polyline, scans, stop_and_go, straight
+from .scenes import RATE, polyline, scans, stop_and_go, straight
 
 
 def _crossing(rng, clutter=0.0):
@@ -244,7 +244,8 @@ def test_a_vehicle_that_stands_through_is_reported_headless_once_it_stood_standi
         got = tracker.step(float(t), dets.xy[m], dets.doppler[m], dets.sensor_xy[m])
         if len(got):
             out.append(got)
-        assert len(tracker.live[0].hist) <= max(cfg.min_rows, 41)
+        # memory: the updates of standing_s before it is reported, the newest one after
+        assert len(tracker.live[0].hist) <= cfg.standing_s * RATE + 2
     rows = Detections.concat(out)
     # the backlog at 4 s (from the first update after the spawning scan), then scan by scan
     assert out[0].t.min() == 0.1 and out[0].t.max() >= cfg.standing_s
