@@ -4,9 +4,10 @@
         --variant base: --variant r50:topology.max_center_dist=50
 
 Each case is made once (``bench.make_case``) and estimated with every variant's overrides
-(``name:section.key=value,...``, a tuple as ``6+7``; sections ``topology`` (TopologyConfig), ``lanes``
-(LaneConfig) and ``tracker`` (TrackerConfig, the radar tracker of raw windows)); the pooled metrics of each variant are printed (``evaluate.aggregate``) and,
-with ``--json``, written with the per-case metrics.
+(``name:section.key=value,...``, a tuple as ``6+7``; sections ``topology`` (TopologyConfig),
+``lanes`` (LaneConfig) and ``tracker`` (TrackerConfig, the radar tracker of raw windows));
+the pooled metrics of each variant are printed (``evaluate.aggregate``) and, with
+``--json``, written with the per-case metrics.
 """
 
 from __future__ import annotations

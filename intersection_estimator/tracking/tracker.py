@@ -77,7 +77,7 @@ class _Track:
     state and covariance) since the last rows handed out."""
 
     __slots__ = ('x', 'P', 'hits', 'miss', 'id', 'hist', 'start', 'moved', 'heading', 'reported',
-                 't0', 't')
+                 't0')
 
     def __init__(self, z, v, tid: int, t: float, cfg: TrackerConfig):
         self.x = np.array([z[0], z[1], v[0], v[1]])
@@ -90,21 +90,22 @@ class _Track:
         self.moved = False
         self.heading = math.nan
         self.reported = False
-        self.t0 = self.t = t
+        self.t0 = t                           # hist loses its first updates online
 
     def drives(self, cfg: TrackerConfig) -> bool:
         """Has the track driven: moved (``min_speed``) and ``min_path_m`` from its start?"""
         return (self.hits >= cfg.min_rows and self.moved
                 and float(np.hypot(*(self.x[:2] - self.start))) >= cfg.min_path_m)
 
-    def stands(self, cfg: TrackerConfig) -> bool:
-        """Has the track lived ``standing_s`` without driving (a queue creeps)?"""
+    def lived(self, cfg: TrackerConfig) -> bool:
+        """Has the track lived ``standing_s`` (0: never) with ``min_rows`` updates?"""
         return (cfg.standing_s > 0 and self.hits >= cfg.min_rows
-                and self.t - self.t0 >= cfg.standing_s and not self.drives(cfg))
+                and self.hist[-1][0] - self.t0 >= cfg.standing_s)
 
     def passes(self, cfg: TrackerConfig) -> bool:
-        """Is the track reported (its rows handed out)?"""
-        return self.drives(cfg) or self.stands(cfg)
+        """Is the track reported (its rows handed out): has it driven, or lived
+        ``standing_s`` without driving (a queue, which creeps; a parked car)?"""
+        return self.drives(cfg) or self.lived(cfg)
 
 
 class RadarTracker:
@@ -139,7 +140,8 @@ class RadarTracker:
         owner, near = self._associate(xy, doppler, los)
         for i in np.unique(owner[owner >= 0]):
             sel = owner == i
-            self._update(self.live[i], xy[sel].mean(0), int(sel.sum()), t, los[sel], doppler[sel])
+            rows = (los[sel], doppler[sel]) if self.cfg.doppler_var > 0 else None
+            self._update(self.live[i], xy[sel].mean(0), int(sel.sum()), t, rows)
         self._end_duplicates()
         for tr in self.live:
             tr.miss += 1
@@ -205,13 +207,15 @@ class RadarTracker:
         dmin = d[best, np.arange(n)]
         return np.where(dmin <= 1.0, best, -1), dmin <= self.cfg.spawn_gates
 
-    def _update(self, tr: _Track, z, k: int, t: float, los, doppler) -> None:
+    def _update(self, tr: _Track, z, k: int, t: float, rows=None) -> None:
+        """Position update with the rows' mean ``z`` of ``k`` rows; ``rows``: their lines
+        of sight and Doppler for the Doppler update (None: off)."""
         xp, Pp = tr.x.copy(), tr.P.copy()
         tr.x, tr.P = update(tr.x, tr.P, z, self.cfg.row_var / k)
-        self._update_doppler(tr, los, doppler)
+        if rows is not None:
+            self._update_doppler(tr, *rows)
         tr.hits += 1
         tr.miss = -1
-        tr.t = t
         tr.hist.append((t, xp, Pp, tr.x.copy(), tr.P.copy()))
         if not self.keep_history and not tr.reported and len(tr.hist) > self.cfg.max_backlog:
             del tr.hist[0]
@@ -223,7 +227,7 @@ class RadarTracker:
         sight (:func:`.kalman.update_radial`): it pins a standing vehicle's velocity to zero,
         where positions alone let a track drift along a queue of vehicles."""
         ok = np.isfinite(doppler)
-        if self.cfg.doppler_var <= 0 or not ok.any():
+        if not ok.any():
             return
         u = los[ok].mean(0)
         if float(np.hypot(u[0], u[1])) < 1e-6:

@@ -216,12 +216,17 @@ def test_rows_without_a_sensor_position_are_tracked_without_the_doppler():
     assert max(_coverage(tracks, east, i) for i in np.unique(tracks.track_id)) > 0.9
 
 
+def _parked(seconds: float, seed: int) -> Detections:
+    """Radar of a car that stands at (10, 5) for ``seconds``."""
+    return scans([straight((10.0, 5.0), (0.0, 0.0), 0.0, seconds)], seconds,
+                 np.random.default_rng(seed))
+
+
 def test_online_a_parked_car_holds_at_most_max_backlog_updates():
     """With standing reports off (``standing_s`` 0) a standing object is never reported (it
     never drove); online its track keeps only the newest ``max_backlog`` updates, so memory
     stays bounded however long it stands."""
-    parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 30.0)
-    dets = scans([parked], 30.0, np.random.default_rng(10))
+    dets = _parked(30.0, seed=10)
     tracker = RadarTracker(dataclasses.replace(TrackerConfig(), max_backlog=40, standing_s=0.0))
     for t in np.unique(dets.t):
         m = dets.t == t
@@ -234,8 +239,7 @@ def test_a_vehicle_that_stands_through_is_reported_headless_once_it_stood_standi
     """A parked car (or a queue's vehicle) that never drove: after ``standing_s`` of stamp
     time its rows are handed out online, backlog first, with no heading (radar cannot tell
     which way it faces) and speed 0; the batch reports the same track; memory stays bounded."""
-    parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 30.0)
-    dets = scans([parked], 30.0, np.random.default_rng(10))
+    dets = _parked(30.0, seed=10)
     cfg = dataclasses.replace(TrackerConfig(), standing_s=4.0)
     tracker = RadarTracker(cfg)
     out = []
@@ -258,8 +262,7 @@ def test_a_vehicle_that_stands_through_is_reported_headless_once_it_stood_standi
 
 def test_a_short_stand_is_not_reported():
     """A vehicle seen standing for less than ``standing_s`` gives no track."""
-    parked = straight((10.0, 5.0), (0.0, 0.0), 0.0, 2.5)
-    assert len(track_radar(scans([parked], 2.5, np.random.default_rng(11)))) == 0
+    assert len(track_radar(_parked(2.5, seed=11))) == 0
 
 
 @pytest.mark.parametrize('doppler_var', [0.0, 1.0])
