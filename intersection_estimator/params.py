@@ -88,7 +88,7 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('radar_track_doppler_tol', 4.0, "radar tracker: a return joins a track only when its "
               "Doppler is within this of the track's velocity along the line of sight [m/s]",
               0.1, 100.0),
-    ParamSpec('radar_track_doppler_noise', 0.0, "radar tracker: standard deviation of one return's "
+    ParamSpec('radar_track_doppler_noise', 1.0, "radar tracker: standard deviation of one return's "
               'Doppler about its vehicle\'s radial speed, for the velocity update; 0 = Doppler only gates '
               'returns and starts tracks [m/s]', 0.0, 10.0),
     ParamSpec('radar_track_standing_s', 3.0, 'radar tracker: a track that lived this long without '

@@ -22,6 +22,8 @@ _RANGES = {
     'body_along_m': ('(0, 20]', "spread of one radar row along the vehicle's heading [m]"),
     'body_across_m': ('(0, 20]', 'spread of one radar row across the heading [m]'),
     'row_var': ('(0, 100]', 'variance of one row about the vehicle center in the update [m^2]'),
+    'doppler_assoc': (None, "a row goes to the track nearest in position and Doppler together "
+                      "(doppler_tol = 3 sigma); false: in position, Doppler only gates"),
     'doppler_var': ('[0, 100]', "variance of one row's Doppler in the update [(m/s)^2]; 0: "
                     'Doppler gates and starts tracks only'),
     'velocity_sigma0': ('(0, 100]', 'velocity uncertainty of a new track [m/s]'),
@@ -55,7 +57,8 @@ class TrackerConfig:
     body_along_m: float = 1.64     # 4.5 m body (uniform: 1.3 m) and 1 m noise
     body_across_m: float = 1.13    # 1.8 m body (0.52 m) and 1 m noise
     row_var: float = 2.0
-    doppler_var: float = 0.0       # off: on SUMO radar it helps, on Table I it costs (docs/real_junctions.md)
+    doppler_assoc: bool = True
+    doppler_var: float = 1.0       # 1 m/s; with doppler_assoc (docs/real_junctions.md, "Doppler")
     velocity_sigma0: float = 3.0
     min_speed: float = 1.0
     heading_speed: float = 3.0

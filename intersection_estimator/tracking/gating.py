@@ -4,7 +4,13 @@ A vehicle returns 1-4 radar rows per scan spread over its body, so a row is comp
 a track's predicted position under the track's position covariance plus the spread of one
 row about the vehicle's center, oriented along the track's velocity (round while it stands).
 A row whose Doppler disagrees with the track's predicted radial speed is not its row
-(neighbouring vehicles of a queue and of the opposite lane differ there first).
+(neighbouring vehicles of a queue and of the opposite lane differ there first). Within that
+gate, with ``doppler_assoc``, the Doppler innovation counts in the distance too (its
+standard deviation ``doppler_tol`` / 3, the gate at 3 sigma): in the box, where the rows of
+two vehicles that cross fall in both gates, a row goes to the track whose radial speed it
+shows. Position alone let such tracks swap vehicles and draw turns nobody drove, the more
+so once the Doppler update ties a track's velocity to the rows it took
+(docs/real_junctions.md, "Doppler").
 """
 
 from __future__ import annotations
@@ -36,7 +42,9 @@ def gate_distance(X: np.ndarray, P: np.ndarray, xy: np.ndarray, cfg: TrackerConf
                   doppler: np.ndarray | None = None, los: np.ndarray | None = None) -> np.ndarray:
     """(tracks, rows) Mahalanobis distance of rows ``xy`` from the predicted tracks (states
     ``X``, covariances ``P``) in gates (``gate_sigma``); inf where a row's ``doppler`` is
-    more than ``doppler_tol`` from the track's velocity along the row's line of sight ``los``."""
+    more than ``doppler_tol`` from the track's velocity along the row's line of sight ``los``,
+    and with ``doppler_assoc`` that difference joins the distance in units of
+    ``doppler_tol`` / 3."""
     S = P[:, :2, :2] + body_cov(_headings(X), cfg)
     a, b, c = S[:, 0, 0, None], 0.5 * (S[:, 0, 1] + S[:, 1, 0])[:, None], S[:, 1, 1, None]
     ex = xy[None, :, 0] - X[:, 0, None]
@@ -44,7 +52,10 @@ def gate_distance(X: np.ndarray, P: np.ndarray, xy: np.ndarray, cfg: TrackerConf
     # dx' S^-1 dx with the 2 x 2 inverse in closed form
     d = np.sqrt((c * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / (a * c - b * b)) / cfg.gate_sigma
     if doppler is not None:
-        d[np.abs(X[:, 2:] @ los.T - doppler[None]) > cfg.doppler_tol] = np.inf
+        e = np.abs(X[:, 2:] @ los.T - doppler[None])
+        if cfg.doppler_assoc:               # a row without a Doppler: position alone
+            d = np.hypot(d, 3.0 * np.nan_to_num(e) / (cfg.doppler_tol * cfg.gate_sigma))
+        d[e > cfg.doppler_tol] = np.inf
     return d
 
 

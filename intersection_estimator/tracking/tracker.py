@@ -1,10 +1,10 @@
 """A radar tracker: radar rows scan by scan -> tracks with position, heading and speed.
 
 Per scan (one stamp), rows that survive the radar clutter filter go to the track whose
-gate (:func:`.gating.gate_distance`) they are nearest, inside one gate; a track is updated
-with the mean of its rows (:func:`.kalman.update`, variance ``row_var`` / rows) and, with
-``doppler_var`` > 0 (off by default), their mean Doppler (:func:`.kalman.update_radial`,
-variance ``doppler_var`` / rows). Rows
+gate (:func:`.gating.gate_distance`: position and Doppler) they are nearest, inside one
+gate; a track is updated with the mean of its rows (:func:`.kalman.update`, variance
+``row_var`` / rows) and, with ``doppler_var`` > 0, their mean Doppler
+(:func:`.kalman.update_radial`, variance ``doppler_var`` / rows). Rows
 farther than ``spawn_gates`` from every track are clustered (single linkage within
 ``cluster_m``) and each cluster starts a track whose velocity is its Doppler along the line
 of sight. Two tracks on one vehicle: the younger ends (:func:`.gating.duplicates`). A

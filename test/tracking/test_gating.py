@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
+import pytest
 
 from intersection_estimator.tracking import TrackerConfig
 from intersection_estimator.tracking.gating import body_cov, duplicates, gate_distance
@@ -29,11 +31,28 @@ def test_a_row_ahead_joins_where_a_row_beside_does_not():
     assert d[0] <= 1.0 < d[1]
 
 
-def test_a_row_whose_doppler_disagrees_is_not_the_tracks():
+@pytest.mark.parametrize('assoc', [False, True])
+def test_a_row_whose_doppler_disagrees_is_not_the_tracks(assoc):
     X, P = _track(0, 0, 10, 0)
     los = np.array([[1.0, 0.0], [1.0, 0.0]])
-    d = gate_distance(X, P, np.zeros((2, 2)), CFG, np.array([9.8, -9.8]), los)[0]
-    assert d[0] == 0 and math.isinf(d[1])
+    cfg = dataclasses.replace(CFG, doppler_assoc=assoc)
+    d = gate_distance(X, P, np.zeros((2, 2)), cfg, np.array([9.8, -9.8]), los)[0]
+    assert d[0] == pytest.approx(0.2 * 3 / (cfg.doppler_tol * cfg.gate_sigma) if assoc else 0.0)
+    assert math.isinf(d[1])
+
+
+def test_with_doppler_association_a_row_goes_to_the_track_whose_radial_speed_it_shows():
+    """Two vehicles cross at 10 m/s, one east, one north; a row of the northbound one,
+    seen along the line of sight (0.6, 0.8), lies a little nearer the eastbound track's
+    predicted position. Both radial speeds (6 and 8 m/s) pass the Doppler gate; its
+    Doppler, 8 m/s, is the northbound one's."""
+    X = np.array([[0.0, 0.0, 10.0, 0.0], [0.8, 0.0, 0.0, 10.0]])
+    P = np.repeat(np.diag([0.1, 0.1, 1.0, 1.0])[None], 2, axis=0)
+    row, los, dop = np.array([[0.35, 0.0]]), np.array([[0.6, 0.8]]), np.array([8.0])
+    plain = gate_distance(X, P, row, dataclasses.replace(CFG, doppler_assoc=False), dop, los)[:, 0]
+    joint = gate_distance(X, P, row, dataclasses.replace(CFG, doppler_assoc=True), dop, los)[:, 0]
+    assert np.isfinite(plain).all() and plain.argmin() == 0      # position alone: the wrong track
+    assert joint.argmin() == 1 and joint[1] <= 1.0
 
 
 @settings(max_examples=60, deadline=None)
