@@ -30,7 +30,7 @@ LEAVING = -1
 __all__ = [
     'topology_key',
     'ENTERING', 'LEAVING', 'Arm', 'Intersection', 'Lanelet',
-    'wrap_angle', 'lane_offset',
+    'wrap_angle', 'lane_offset', 'unit_vectors', 'direction_class',
 ]
 
 
@@ -51,6 +51,22 @@ def topology_key(t: 'Intersection', center_m: float, angle_deg: float, gap_m: fl
 def wrap_angle(a):
     """Wrap an angle (scalar or array) to ``[-pi, pi)``."""
     return (np.asarray(a) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def unit_vectors(vx, vy):
+    """``(ux, uy, ok)``: the directions of the vectors ``(vx, vy)``; (0, 0) and ``ok``
+    False where a vector is shorter than 1e-9."""
+    n = np.hypot(vx, vy)
+    ok = n > 1e-9
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(ok, vx / n, 0.0), np.where(ok, vy / n, 0.0), ok
+
+
+def direction_class(x, y, hx, hy, center):
+    """``ENTERING`` where the heading ``(hx, hy)`` at ``(x, y)`` points towards ``center``
+    (an entering vehicle), else ``LEAVING`` (as floats)."""
+    return np.where(hx * (center[0] - x) + hy * (center[1] - y) > 0,
+                    float(ENTERING), float(LEAVING))
 
 
 def lane_offset(gap: float, lane_width: float, k, direction: int, traffic_side: int = 1):

@@ -16,10 +16,10 @@ import math
 import numpy as np
 from numba import njit
 
-from ..model import Arm, Intersection, wrap_angle
+from ..model import Arm, Intersection, unit_vectors, wrap_angle
 from ..observations import Detections
 from .likelihood import ObservationSet
-from .preprocess import PreprocessConfig, radar_filter, unit_vectors
+from .preprocess import PreprocessConfig, radar_filter
 from .state import pack_state
 from .voxels import voxelise
 

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..model import direction_class, unit_vectors
 from ..observations import Detections
 from .bend import straighten
 from .config import PreprocessConfig
@@ -37,19 +38,7 @@ from .voxels import (RAYS, arm_voxel_set, assign_arms, radar_frame, radar_voxels
 
 __all__ = ['PreprocessConfig', 'tracked_observations', 'radar_observations', 'RadarRows',
            'radar_rows', 'radar_filter', 'heading_observations', 'preprocess', 'split_tracks',
-           'moving_tracks', 'track_bounds', 'moving_mask', 'unit_vectors']
-
-
-def unit_vectors(vx, vy):
-    n = np.hypot(vx, vy)
-    ok = n > 1e-9
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return np.where(ok, vx / n, 0.0), np.where(ok, vy / n, 0.0), ok
-
-
-def _direction_class(x, y, hx, hy, center):
-    """+1 entering (moving toward the center), -1 leaving."""
-    return np.where(hx * (center[0] - x) + hy * (center[1] - y) > 0, 1.0, -1.0)
+           'moving_tracks', 'track_bounds', 'moving_mask']
 
 
 def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
@@ -87,7 +76,7 @@ def tracked_observations(dets: Detections, center, cfg: PreprocessConfig,
     if len(o) == 0:
         return ObservationSet.empty()
     hx, hy, ok = unit_vectors(o[:, 2], o[:, 3])
-    d = _direction_class(o[:, 0], o[:, 1], hx, hy, c)
+    d = direction_class(o[:, 0], o[:, 1], hx, hy, c)
     obs = ObservationSet(o[:, 0].copy(), o[:, 1].copy(), hx, hy, ok, d, o[:, 5].copy(),
                          _part_sigma(track_label, o[:, 4].astype(np.int64), cfg),
                          np.full(len(o), math.radians(cfg.sigma_angle_deg)), o[:, 5].copy())
@@ -296,7 +285,7 @@ def heading_observations(dets: Detections, center, cfg: PreprocessConfig,
         parts.append((vxy, cnt, sv))
     vxy, cnt, sv = (np.concatenate(p) for p in zip(*parts))
     hx, hy, okh = unit_vectors(sv[:, 0], sv[:, 1])
-    d = _direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
+    d = direction_class(vxy[:, 0], vxy[:, 1], hx, hy, c)
     obs = ObservationSet(vxy[:, 0].copy(), vxy[:, 1].copy(), hx, hy, okh, d,
                          cfg.weight_scale * cnt ** cfg.weight_power,
                          np.full(len(vxy), cfg.sigma_point),

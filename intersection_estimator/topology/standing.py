@@ -35,6 +35,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..model import ENTERING, direction_class, unit_vectors
 from ..observations import Detections
 from .likelihood import ObservationSet
 
@@ -103,8 +104,8 @@ def standing_observations(dets: Detections, center, order, starts, ends, still,
     headless = ~np.isfinite(hv[:, 0])
     if headless.any():                    # faces the box: the queue rule alone decides
         to_c = c - xy[headless]
-        hv[headless] = to_c / np.maximum(np.hypot(to_c[:, 0], to_c[:, 1]), 1e-9)[:, None]
-    facing = hv[:, 0] * (c[0] - xy[:, 0]) + hv[:, 1] * (c[1] - xy[:, 1]) > 0
+        hv[headless] = np.stack(unit_vectors(to_c[:, 0], to_c[:, 1])[:2], axis=1)
+    facing = direction_class(xy[:, 0], xy[:, 1], hv[:, 0], hv[:, 1], c) == ENTERING
     xy, hv = xy[on & facing], hv[on & facing]
     xy, hv = _in_queues(xy, hv, cfg.standing_queue)
     n = len(xy)

@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
+from ..model import direction_class
 from .mcmc import Posterior
-from .preprocess import _direction_class
 from .refit import refit_arm
 from .state import ANG, CX, CY, HDR, MAXA, NARMS, NIN, NOUT, STRIDE, WID, arm_angles, wrap
 
@@ -69,7 +69,7 @@ def _directions(obs, center) -> np.ndarray:
     axis pointed away from the center (orientation known), else its position angle."""
     pos = np.arctan2(obs.y - center[1], obs.x - center[0])
     # an entering part heads to the center: its arm points the other way
-    sign = -_direction_class(obs.x, obs.y, obs.hx, obs.hy, center)
+    sign = -direction_class(obs.x, obs.y, obs.hx, obs.hy, center)
     axis = np.arctan2(sign * obs.hy, sign * obs.hx)
     return np.where(obs.has_o, axis, pos)
 

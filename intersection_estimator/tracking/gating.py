@@ -21,6 +21,10 @@ from .config import TrackerConfig
 
 __all__ = ['body_cov', 'gate_distance', 'duplicates']
 
+#: ``doppler_tol`` is this many standard deviations of a row's Doppler innovation
+#: (``doppler_assoc``: the innovation's weight in the distance)
+DOPPLER_TOL_SIGMAS = 3.0
+
 
 def body_cov(u: np.ndarray, cfg: TrackerConfig) -> np.ndarray:
     """(n, 2, 2) covariance of one row about a vehicle heading along unit ``u`` (a zero
@@ -54,7 +58,7 @@ def gate_distance(X: np.ndarray, P: np.ndarray, xy: np.ndarray, cfg: TrackerConf
     if doppler is not None:
         e = np.abs(X[:, 2:] @ los.T - doppler[None])
         if cfg.doppler_assoc:               # a row without a Doppler: position alone
-            d = np.hypot(d, 3.0 * np.nan_to_num(e) / (cfg.doppler_tol * cfg.gate_sigma))
+            d = np.hypot(d, DOPPLER_TOL_SIGMAS * np.nan_to_num(e) / (cfg.doppler_tol * cfg.gate_sigma))
         d[e > cfg.doppler_tol] = np.inf
     return d
 
