@@ -91,6 +91,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec('radar_track_doppler_noise', 1.0, "radar tracker: standard deviation of one return's "
               'Doppler about its vehicle\'s radial speed, for the velocity update; 0 = Doppler only gates '
               'returns and starts tracks [m/s]', 0.0, 10.0),
+    ParamSpec('radar_track_doppler_assoc', True, "radar tracker: a return joins the track nearest in "
+              "position and Doppler together (Mahalanobis, the Doppler's sigma radar_track_doppler_tol / 3); "
+              "false = nearest in position alone, the Doppler only gates"),
     ParamSpec('radar_track_standing_s', 3.0, 'radar tracker: a track that lived this long without '
               'driving (a queue, a parked car) is reported without a heading; 0 = never [s]', 0.0, 3600.0),
     ParamSpec('radar_track_reorder_s', 0.2, 'radar tracker: scans are held this long (stamp time) and '
@@ -214,6 +217,7 @@ def pipeline_config(values: dict):
                                          body_across_m=float(values['radar_track_spread_across']),
                                          doppler_tol=float(values['radar_track_doppler_tol']),
                                          doppler_var=float(values['radar_track_doppler_noise']) ** 2,
+                                         doppler_assoc=bool(values['radar_track_doppler_assoc']),
                                          standing_s=float(values['radar_track_standing_s']),
                                          reorder_s=float(values['radar_track_reorder_s'])))
     cfg.validate()

@@ -61,10 +61,12 @@ def test_weak_labels_reach_the_topology_and_bad_ones_are_refused():
 def test_radar_tracker_parameters_reach_the_pipeline():
     cfg = P.pipeline_config(dict(P.defaults(), radar_tracking=False, radar_track_spread_along=2.0,
                                  radar_track_spread_across=1.5, radar_track_doppler_tol=3.0,
-                                 radar_track_doppler_noise=0.3, radar_track_standing_s=0.0))
+                                 radar_track_doppler_noise=0.3, radar_track_standing_s=0.0,
+                                 radar_track_doppler_assoc=False))
     t = cfg.radar_tracking
     assert (t.enabled, t.body_along_m, t.body_across_m, t.doppler_tol) == (False, 2.0, 1.5, 3.0)
-    assert (t.doppler_var, t.standing_s) == (pytest.approx(0.09), 0.0)
+    assert (t.doppler_var, t.standing_s, t.doppler_assoc) == (pytest.approx(0.09), 0.0, False)
     d = P.pipeline_config(P.defaults()).radar_tracking
-    assert (d.doppler_var, d.standing_s) == (TrackerConfig().doppler_var, TrackerConfig().standing_s)
+    assert ((d.doppler_var, d.standing_s, d.doppler_assoc)
+            == (TrackerConfig().doppler_var, TrackerConfig().standing_s, TrackerConfig().doppler_assoc))
     assert P.pipeline_config(P.defaults()).radar_tracking.enabled
