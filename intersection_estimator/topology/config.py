@@ -291,7 +291,7 @@ class TopologyConfig:
     min_part_length: float = 5.0
     min_track_speed: float = 3.0
     standing_weight: float = 1.0
-    standing_min_s: float = 3.0
+    standing_min_s: float = 2.0      # AV2 tracks a passed queue 2-3 s (docs/real_junctions.md)
     standing_queue: int = 2
     trim_turn_deg: float = 15.0
     min_center_dist: float = 20.0

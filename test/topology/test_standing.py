@@ -85,6 +85,23 @@ def test_clutter_pedestrians_and_vehicles_in_the_box_are_not_standing_traffic():
     assert len(_obs(dets)) == 0
 
 
+def test_a_queue_seen_for_a_few_seconds_counts_but_not_flickering_tracks():
+    """A recording car passes a queue: each waiting vehicle is tracked for 2-3 s only
+    (AV2 scenario 2's side street; docs/real_junctions.md, "Queues seen for two seconds").
+    Such tracks count from ``standing_min_s`` (2 s) on; tracks of one second do not."""
+    arm = GT.arms[QUEUE_ARM]
+
+    def queue(seconds):
+        rng = np.random.default_rng(3)
+        return Detections.concat([
+            _standing(_lane_point(GT, arm, ENTERING, 0, 14.0 + 7.0 * k), arm.angle + math.pi,
+                      600 + k, rng, seconds=seconds) for k in range(3)])
+    assert PreprocessConfig().standing_min_s == 2.0
+    assert len(_obs(queue(2.5), PreprocessConfig())) == 3
+    assert len(_obs(queue(1.0), PreprocessConfig())) == 0
+    assert len(_obs(queue(2.5), replace(PreprocessConfig(), standing_min_s=3.0))) == 0
+
+
 def test_only_vehicles_queued_towards_the_box_count():
     rng = np.random.default_rng(5)
     arm = GT.arms[QUEUE_ARM]
