@@ -629,7 +629,8 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=Non
     post = ((cfg.share_concentration, 1.0),) if conc is None else conc.post
     eps = 0.0 if conc is None else conc.off
     kw['evidence'] = {**kw.get('evidence', {}), 'lane_off_share': eps,
-                      'lane_choice_concentration': max(post, key=lambda kp: kp[1])[0]}
+                      'lane_choice_concentration': max(post, key=lambda kp: kp[1])[0],
+                      'lane_choice_post': [tuple(kp) for kp in post]}    # fusion pools it
     if not mine:
         llr = _mixed(post, lambda k: _absence_llr(p_dir, 1.0 / n_lanes, cfg, k))
         return _absence('lane_removed', f'lane_removed:{lane_id}', p_dir, 1.0 / n_lanes, cfg,

@@ -12,10 +12,14 @@
                                      "map_arm": 1, "direction": "in|out|", "map_lanes": ["931"],
                                      "evidence": {"drives_showing": 1, "drives_contradicting": 0,
                                                   "drives_not_seeing": 0, "passages": 8.1,
-                                                  "log_odds": 3.4, "showing": ["id"], ...}}],
+                                                  "log_odds": 3.4, "showing": ["id"],
+                                                  "absence_kept": 0.4, ...}}],
                         "outvoted": [... same fields: shown by a drive, below min_confidence ...]}],
      "summary": {"bags": 3, "failed": 1, "intersections_seen": 1, "changed": 1,
                  "changes": {"lane_moved": 1}}}
+
+``absence_kept`` (absences fused from several drives under one shared share of the element
+whose drivers keep to their lanes, :func:`.fuse.shared_share`; absent when all is kept).
 
 Floats are rounded to 6 digits and keys sorted, so equal results are equal bytes. No
 machine paths: bags and the map by name.

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 
 import pytest
 
@@ -145,3 +146,54 @@ def test_traffic_on_a_quiet_arm_or_lane_refutes_its_absence():
     X = fuse(views, cfg)['X1']
     assert X.changes == [], [(c.key, c.confidence) for c in X.changes]
     assert all(c.evidence['drives_contradicting'] == 3 for c in X.candidates)
+
+
+def _empty_lane(post, passages=6.0, share=0.5):
+    """A drive's absence of mapped lane 9 after ``passages`` vehicles of its turns, read under
+    the lane-choice concentration posterior ``post`` (:class:`LaneChoice`)."""
+    from intersection_estimator.fleet.changes import _absence, _mixed, _absence_llr
+    cfg = ChangeConfig()
+    llr = _mixed(post, lambda k: _absence_llr(passages, share, cfg, k))
+    return _absence('lane_removed', 'lane_removed:9', passages, share, cfg, llr=llr, map_arm=0,
+                    direction='in', map_lanes=['9'],
+                    evidence={'lane_choice_post': list(post), 'lane_choice_concentration': post[0][0]})
+
+
+def _fused_empty_lane(post, drives):
+    views = []
+    for d in range(drives):
+        v = _view()
+        v.counts_ok.discard((0, 'in'))
+        f = _empty_lane(post)
+        v.findings, v.weak = ([f], []) if f.confidence > 0.5 else ([], [f])
+        views.append((f'd{d}', v))
+    X = fuse(views)['X1']
+    return (X.changes + X.candidates)[0]
+
+
+def test_drivers_who_keep_to_one_lane_do_not_remove_it_drive_after_drive():
+    """A lane drivers avoid out of habit stays empty in every drive: with concentrated lane
+    choice the drives share one share of the lane, so ten empty drives are far less than ten
+    times the evidence of one: 60 vehicles that all missed the lane leave it at even odds,
+    where ten independent drives would remove it (module doc of fuse)."""
+    from intersection_estimator.fleet.fuse import shared_share
+    habit = ((0.5, 1.0),)
+    one = _fused_empty_lane(habit, 1)
+    ten = _fused_empty_lane(habit, 10)
+    assert shared_share([_empty_lane(habit)], ChangeConfig()) == 1.0       # one drive: as it was
+    assert one.evidence['log_odds'] == pytest.approx(_empty_lane(habit).log_lr + _empty_lane(habit).prior)
+    gain = ten.evidence['log_odds'] - one.evidence['log_odds']
+    assert 0.0 < ten.evidence['absence_kept'] < 0.5
+    assert 0.0 < gain < 9 * _empty_lane(habit).log_lr / 2
+    summed = 10 * _empty_lane(habit).log_lr + _empty_lane(habit).prior   # drives as independent
+    assert 1.0 / (1.0 + math.exp(-summed)) > 0.99 and ten.confidence < 0.7
+
+
+def test_evenly_spread_drivers_still_add_up_their_empty_lane():
+    """Drivers who spread evenly over the lanes (exact shares, concentration 0): every drive's
+    empty lane is independent evidence and the sum stands, as before."""
+    even = ((0.0, 1.0),)
+    ten = _fused_empty_lane(even, 10)
+    assert 'absence_kept' not in ten.evidence
+    assert ten.evidence['log_odds'] == pytest.approx(10 * _empty_lane(even).log_lr + _empty_lane(even).prior)
+    assert ten.confidence > 0.99
