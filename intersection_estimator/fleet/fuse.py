@@ -14,12 +14,12 @@ no evidence either way is not a change).
 
 Absences share one share (:func:`shared_share`): how often drivers take a lane is a habit
 of the junction (a lane beside the one everybody takes for their turn stays empty in every
-drive), not a fresh draw per drive. Summing each drive's absence evidence treats the drives'
-empty lanes as independent, and on demand like SUMO's the false "lane removed" claims of an
-unchanged map grew with the drives (25 / 35 / 55 % for 1 / 3 / 10 drives). The drives'
-passages are pooled under the over-dispersed share instead, and the summed evidence is
-scaled by what that pooling keeps of it; with exact shares (drivers spread evenly, Table I)
-it keeps everything.
+drive), not a fresh draw per drive. Summed as independent, the drives' absence evidence
+grows without bound for such a lane, and the false "lane removed" claims of an unchanged map
+grew with the drives (docs/fleet.md, "Fusion: drives share one share of a lane"). The
+drives' passages are pooled under the over-dispersed share instead, and the summed evidence
+is scaled by what that pooling keeps of it; with exact shares (drivers spread evenly over
+the lanes) it keeps everything.
 
 Independent of completion order: drives are sorted by their id before anything is added,
 so the floating-point sums are the same whichever task finished first.
