@@ -94,10 +94,10 @@ def _fuse_key(key: str, views: list[tuple[str, DriveView]], cfg: ChangeConfig) -
 
 def shared_share(shown: list[Finding], cfg: ChangeConfig) -> float:
     """Share (<= 1) of the drives' summed absence evidence that one share of the element,
-    shared by all drives, keeps (module doc): ``-ln E[(1 - f)^(sum P_i)]`` with the drives'
-    passages ``P_i`` pooled at their passage-weighted share, over the sum of the drives' own
-    ``-ln E[(1 - f_i)^P_i]`` (:func:`.changes._absence_llr`), both under the spread of ``f``
-    that all drives together show: their lane-choice concentration posteriors
+    shared by all drives, keeps (module doc): ``-ln E[(1 - f)^(sum P_i)]`` over the sum of
+    the drives' ``-ln E[(1 - f_i)^P_i]`` (:func:`.changes._absence_llr`), both at the drives'
+    passage-weighted share and off-lane share (the ratio is the sharing alone), under the
+    spread of ``f`` that all drives together show: their lane-choice concentration posteriors
     (:class:`.changes.LaneChoice`; the config's ``share_concentration`` without one) pooled
     (the concentration too is a habit of the junction; flat prior: their product). 1 for
     one drive, for findings that are no absence and with exact shares."""
@@ -109,11 +109,13 @@ def shared_share(shown: list[Finding], cfg: ChangeConfig) -> float:
     off = np.array([float(f.evidence.get('lane_off_share', 0.0)) for f in ab])
     post = _pooled_posterior([f.evidence.get('lane_choice_post') or ((cfg.share_concentration, 1.0),)
                               for f in ab])
-    own = sum(_mixed(post, lambda k, p=p, s=s, o=o: _absence_llr(p, s, cfg, k, o))
-              for p, s, o in zip(P, share, off))
+    if all(k <= 0.0 for k, _ in post):
+        return 1.0                        # exact shares: the drives' empty lanes are independent
     s_all, o_all = float(P @ share / P.sum()), float(P @ off / P.sum())
+    own = sum(_mixed(post, lambda k, p=p: _absence_llr(p, s_all, cfg, k, o_all)) for p in P)
     pooled = _mixed(post, lambda k: _absence_llr(float(P.sum()), s_all, cfg, k, o_all))
-    return min(1.0, pooled / own) if own > 0.0 else 1.0
+    keep = pooled / own if own > 0.0 else 1.0
+    return 1.0 if keep > 1.0 - 1e-9 else keep
 
 
 def _pooled_posterior(posts: list) -> tuple:
