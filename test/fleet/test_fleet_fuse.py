@@ -76,23 +76,34 @@ def test_order_independent_bitwise():
         assert got == ref
 
 
-def _missing(lane, passages=4.0):
-    from intersection_estimator.fleet.changes import _absence
-    return _absence('lane_removed', f'lane_removed:{lane}', passages, 0.5, ChangeConfig(), map_arm=0,
-                    direction='in', map_lanes=[lane])
+def _missing(lane, passages=4.0, post=None, share=0.5):
+    """A drive's absence of mapped lane ``lane`` after ``passages`` vehicles of its turns; with
+    ``post``, read under that lane-choice concentration posterior (:class:`LaneChoice`)."""
+    from intersection_estimator.fleet.changes import _absence, _absence_llr, _mixed
+    cfg = ChangeConfig()
+    if post is None:
+        return _absence('lane_removed', f'lane_removed:{lane}', passages, share, cfg, map_arm=0,
+                        direction='in', map_lanes=[lane])
+    llr = _mixed(post, lambda k: _absence_llr(passages, share, cfg, k))
+    return _absence('lane_removed', f'lane_removed:{lane}', passages, share, cfg, llr=llr, map_arm=0,
+                    direction='in', map_lanes=[lane], evidence={'lane_choice_post': list(post)})
+
+
+def _absent_view(f, seen=()):
+    """A drive without the mapped lane count of arm 0's entering side showing the absence
+    ``f`` (a finding, or a weak one below 0.5), having driven the lanes ``seen``."""
+    v = _view()
+    v.counts_ok.discard((0, 'in'))
+    v.findings, v.weak = ([f], []) if f.confidence > 0.5 else ([], [f])
+    v.lanes_seen = set(seen)
+    return v
 
 
 def test_drives_missing_different_lanes_do_not_add_up():
     """Short drives each miss *another* lane of one arm: the lane one drive missed, the
     others drove (``lanes_seen``), so nothing is removed."""
-    views = []
-    for d, (gone, seen) in enumerate((('8', '9'), ('9', '8'), ('8', '9'), ('9', '8'))):
-        v = _view()
-        v.counts_ok.discard((0, 'in'))
-        v.weak = [_missing(gone)] if _missing(gone).confidence < 0.5 else []
-        v.findings = [] if v.weak else [_missing(gone)]
-        v.lanes_seen = {seen}
-        views.append((f'd{d}', v))
+    views = [(f'd{d}', _absent_view(_missing(gone), {seen}))
+             for d, (gone, seen) in enumerate((('8', '9'), ('9', '8'), ('8', '9'), ('9', '8')))]
     X = fuse(views)['X1']
     assert X.changes == []
     assert {c.key for c in X.candidates} == {'lane_removed:8', 'lane_removed:9'}
@@ -148,26 +159,13 @@ def test_traffic_on_a_quiet_arm_or_lane_refutes_its_absence():
     assert all(c.evidence['drives_contradicting'] == 3 for c in X.candidates)
 
 
-def _empty_lane(post, passages=6.0, share=0.5):
-    """A drive's absence of mapped lane 9 after ``passages`` vehicles of its turns, read under
-    the lane-choice concentration posterior ``post`` (:class:`LaneChoice`)."""
-    from intersection_estimator.fleet.changes import _absence, _mixed, _absence_llr
-    cfg = ChangeConfig()
-    llr = _mixed(post, lambda k: _absence_llr(passages, share, cfg, k))
-    return _absence('lane_removed', 'lane_removed:9', passages, share, cfg, llr=llr, map_arm=0,
-                    direction='in', map_lanes=['9'],
-                    evidence={'lane_choice_post': list(post), 'lane_choice_concentration': post[0][0]})
+def _empty_lane(post):
+    """Lane 9 empty after 6 vehicles of its turns, under lane-choice posterior ``post``."""
+    return _missing('9', passages=6.0, post=post)
 
 
 def _fused_empty_lane(post, drives):
-    views = []
-    for d in range(drives):
-        v = _view()
-        v.counts_ok.discard((0, 'in'))
-        f = _empty_lane(post)
-        v.findings, v.weak = ([f], []) if f.confidence > 0.5 else ([], [f])
-        views.append((f'd{d}', v))
-    X = fuse(views)['X1']
+    X = fuse([(f'd{d}', _absent_view(_empty_lane(post))) for d in range(drives)])['X1']
     return (X.changes + X.candidates)[0]
 
 
