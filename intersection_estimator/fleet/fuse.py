@@ -100,9 +100,13 @@ def shared_share(shown: list[Finding], cfg: ChangeConfig) -> float:
     spread of ``f`` that all drives together show: their lane-choice concentration posteriors
     (:class:`.changes.LaneChoice`; the config's ``share_concentration`` without one) pooled
     (the concentration too is a habit of the junction; flat prior: their product). 1 for
-    one drive, for findings that are no absence and with exact shares."""
-    ab = [f for f in shown if 'share' in f.evidence and f.evidence.get('passages', 0.0) > 0.0]
-    if len(ab) < 2 or len(ab) < len(shown):
+    one drive, for findings that are no absence and with exact shares. A drive that shows the
+    absence with no passage adds nothing to either sum (its term is 0), so it does not stop the
+    others' pooling."""
+    if any('share' not in f.evidence for f in shown):
+        return 1.0
+    ab = [f for f in shown if f.evidence.get('passages', 0.0) > 0.0]
+    if len(ab) < 2:
         return 1.0
     P = np.array([float(f.evidence['passages']) for f in ab])
     share = np.array([float(f.evidence['share']) for f in ab])

@@ -195,3 +195,17 @@ def test_evenly_spread_drivers_still_add_up_their_empty_lane():
     assert 'absence_kept' not in ten.evidence
     assert ten.evidence['log_odds'] == pytest.approx(10 * _empty_lane(even).log_lr + _empty_lane(even).prior)
     assert ten.confidence > 0.99
+
+
+def test_a_drive_that_shows_the_absence_with_no_passage_does_not_stop_the_pooling():
+    """A drive can show an absence with no passage behind it (its term is 0): it adds nothing
+    to either sum, so the other drives still share one share of the lane; before, one such
+    drive made every drive count as independent again."""
+    from intersection_estimator.fleet.fuse import shared_share
+    habit = ((0.5, 1.0),)
+    busy = [_empty_lane(habit) for _ in range(5)]
+    idle = _missing('9', passages=0.0, post=habit)
+    assert idle.log_lr == 0.0
+    with_idle = shared_share(busy + [idle], ChangeConfig())
+    assert with_idle == pytest.approx(shared_share(busy, ChangeConfig()))
+    assert 0.0 < with_idle < 0.5
