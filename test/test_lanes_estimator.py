@@ -128,6 +128,30 @@ def test_a_track_seen_only_a_few_metres_beyond_the_stop_line_still_gets_its_lane
         assert tr.lane_in == (0, 0) and tr.lane_out == lane_out
 
 
+def _pocket_track(topo, a: int, stop: float) -> Trajectory:
+    """A vehicle on arm ``a`` (along +x) that drives entering lane 1 far out and changes into
+    lane 0 (a turn pocket) 25-30 m before the stop line, then crosses the box (-x)."""
+    f = arm_frames(topo)[a]
+    lat0, lat1 = f.lat[(ENTERING, 0)], f.lat[(ENTERING, 1)]
+    s = np.arange(110.0, -0.5, -1.0)
+    lat = np.interp(s, [stop + 25.0, stop + 30.0], [lat0, lat1])
+    return Trajectory(0, np.concatenate([f.point(s, lat), np.stack([-np.arange(1.0, 40.0), np.zeros(39)], 1)]))
+
+
+def test_an_entering_part_takes_the_lane_it_drives_at_the_stop_line():
+    """``assign_reach``: a vehicle that changed into a turn pocket 25 m before the stop line
+    belongs to the pocket lane, where its turn starts; the mean of its whole part (paper
+    §III-A, ``assign_reach`` inf) lies on the lane it drove far out, which it left."""
+    topo = Intersection(center=[0.0, 0.0], arms=[Arm(angle=0.0, lanes_in=2), Arm(angle=np.pi / 2),
+                                                   Arm(angle=np.pi), Arm(angle=-np.pi / 2)])
+    a = next(i for i, arm in enumerate(topo.arms) if arm.lanes_in == 2)
+    stop = float(stop_distances(topo, LaneConfig())[a])
+    for reach, lane in ((LaneConfig().assign_reach, (a, 0)), (float('inf'), (a, 1))):
+        tr = _pocket_track(topo, a, stop)
+        assign_parts([tr], topo, LaneConfig(assign_reach=reach))
+        assert tr.lane_in == lane
+
+
 def test_trajectories_sorted_by_time_and_ignore_untracked():
     d = Detections.make([[0, 0], [1, 0], [2, 0], [5, 5]], t=[2.0, 1.0, 3.0, 0.0],
                         track_id=[4, 4, 4, -1])

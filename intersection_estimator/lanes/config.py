@@ -79,6 +79,8 @@ _RANGES = {
     'stop_min': ('[0.0, 100.0]', 'smallest stop-line distance from the center [m]'),
     'stop_max': ('[0.0, 200.0]', 'largest stop-line distance from the center [m]'),
     'min_part_points': ('[1, 1000]', 'fewest points of a trajectory part that gets a lane'),
+    'assign_reach': ('(0, inf]', 'an entering part is assigned, and places its lane, by its points this '
+                     'far beyond the stop line [m] (inf: all, paper)'),
     'assign_gate': ('[0.1, 50.0]', 'largest distance of a part mean to its lane center line [m]'),
     'min_connector_evidence': ('[1, 1000]', 'trajectories needed to create a connector'),
     'point_gate': ('[0.1, 50.0]', 'trajectory points farther from their lane sequence are ignored [m]'),
@@ -168,6 +170,7 @@ class LaneConfig:
     stop_max: float = 100.0
     min_part_points: int = 3
     assign_gate: float = 6.0
+    assign_reach: float = 35.0       # docs/real_junctions.md, "Lanes placed next to the stop line"
     min_connector_evidence: int = 1
     point_gate: float = 6.0
     window_segments: int = 1
