@@ -117,7 +117,7 @@ def _assign_nb(pts, tptr, split, r_arm, r_dir, r_o, r_u, r_n, r_lat, stops, insi
                min_len, gate, out_in, out_out, reach):
     """Best ray per trajectory part (see :func:`assign_parts`); -1 where none qualifies. An
     entering part is placed by its points within ``reach`` beyond the stop line when it has
-    ``min_pts`` of them, else by all its points beyond the stop line."""
+    ``min_pts`` of them, else by all its points that count (from ``inside`` into the box on)."""
     for i in range(len(tptr) - 1):
         a0, a1, sp = tptr[i], tptr[i + 1], tptr[i] + split[i]
         for part in range(2):
