@@ -8,8 +8,8 @@ import pytest
 from test_lanes_synth import synth_case
 
 from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator, lanelets_from_topology
-from intersection_estimator.lanes.init import (Trajectory, arm_frames, assign_parts, split_at_center,
-                                               stop_distances, trajectories)
+from intersection_estimator.lanes.init import (Trajectory, arm_frames, assign_parts, fit_frames,
+                                               split_at_center, stop_distances, trajectories)
 from intersection_estimator.model import ENTERING, LEAVING, Arm, Intersection
 from intersection_estimator.observations import Detections
 
@@ -150,6 +150,30 @@ def test_an_entering_part_takes_the_lane_it_drives_at_the_stop_line():
         tr = _pocket_track(topo, a, stop)
         assign_parts([tr], topo, LaneConfig(assign_reach=reach))
         assert tr.lane_in == lane
+
+
+def test_the_lanes_are_fitted_where_their_parts_were_assigned():
+    """``fit_frames`` places an entering lane by the same window as the assignment: an
+    approach whose traffic drifts 2 m sideways beyond 35 m (a curve) leaves the lane where
+    the vehicles drive next to the stop line; the whole parts' mean put it 1 m off."""
+    topo = Intersection(center=[0.0, 0.0], arms=[Arm(angle=0.0, lanes_in=2), Arm(angle=np.pi / 2),
+                                                   Arm(angle=np.pi), Arm(angle=-np.pi / 2)])
+    a = next(i for i, arm in enumerate(topo.arms) if arm.lanes_in == 2)
+    stops = stop_distances(topo, LaneConfig())
+    f = arm_frames(topo)[a]
+    lat0 = f.lat[(ENTERING, 0)]
+    s = np.arange(stops[a] + 70.0, -0.5, -1.0)
+    lat = lat0 + np.interp(s, [stops[a] + 35.0, stops[a] + 70.0], [0.0, 4.0])
+    trajs = [Trajectory(k, np.concatenate([f.point(s, lat), np.stack([-np.arange(1.0, 40.0), np.zeros(39)], 1)]))
+             for k in range(4)]
+    got = {}
+    for reach in (LaneConfig().assign_reach, float('inf')):
+        cfg = LaneConfig(assign_reach=reach, max_refit_angle_deg=0.0)   # lane positions only
+        assign_parts(trajs, topo, cfg, stops)
+        assert all(tr.lane_in == (a, 0) for tr in trajs)
+        got[reach] = fit_frames(topo, trajs, stops, cfg)[a].lat[(ENTERING, 0)]
+    assert abs(got[LaneConfig().assign_reach] - lat0) < 0.05
+    assert got[float('inf')] - lat0 > 0.5
 
 
 def test_trajectories_sorted_by_time_and_ignore_untracked():
