@@ -154,7 +154,7 @@ def test_an_entering_part_takes_the_lane_it_drives_at_the_stop_line():
 
 def test_the_lanes_are_fitted_where_their_parts_were_assigned():
     """``fit_frames`` places an entering lane by the same window as the assignment: an
-    approach whose traffic drifts 2 m sideways beyond 35 m (a curve) leaves the lane where
+    approach whose traffic drifts up to 4 m sideways beyond 35 m (a curve) leaves the lane where
     the vehicles drive next to the stop line; the whole parts' mean put it 1 m off."""
     topo = Intersection(center=[0.0, 0.0], arms=[Arm(angle=0.0, lanes_in=2), Arm(angle=np.pi / 2),
                                                    Arm(angle=np.pi), Arm(angle=-np.pi / 2)])
