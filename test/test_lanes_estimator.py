@@ -128,26 +128,33 @@ def test_a_track_seen_only_a_few_metres_beyond_the_stop_line_still_gets_its_lane
         assert tr.lane_in == (0, 0) and tr.lane_out == lane_out
 
 
-def _pocket_track(topo, a: int, stop: float) -> Trajectory:
-    """A vehicle on arm ``a`` (along +x) that drives entering lane 1 far out and changes into
-    lane 0 (a turn pocket) 25-30 m before the stop line, then crosses the box (-x)."""
-    f = arm_frames(topo)[a]
-    lat0, lat1 = f.lat[(ENTERING, 0)], f.lat[(ENTERING, 1)]
-    s = np.arange(110.0, -0.5, -1.0)
-    lat = np.interp(s, [stop + 25.0, stop + 30.0], [lat0, lat1])
-    return Trajectory(0, np.concatenate([f.point(s, lat), np.stack([-np.arange(1.0, 40.0), np.zeros(39)], 1)]))
-
-
-def test_an_entering_part_takes_the_lane_it_drives_at_the_stop_line():
-    """``assign_reach``: a vehicle that changed into a turn pocket 25 m before the stop line
-    belongs to the pocket lane, where its turn starts; the mean of its whole part (paper
-    §III-A, ``assign_reach`` inf) lies on the lane it drove far out, which it left."""
+def _two_lane_arm():
+    """A four-arm junction whose arm along +x has two entering lanes; (topology, that arm's
+    index, its stop distance [m])."""
     topo = Intersection(center=[0.0, 0.0], arms=[Arm(angle=0.0, lanes_in=2), Arm(angle=np.pi / 2),
                                                    Arm(angle=np.pi), Arm(angle=-np.pi / 2)])
     a = next(i for i, arm in enumerate(topo.arms) if arm.lanes_in == 2)
-    stop = float(stop_distances(topo, LaneConfig())[a])
+    return topo, a, stop_distances(topo, LaneConfig())
+
+
+def _approach(topo, a: int, s, lat, tid: int = 0) -> Trajectory:
+    """A vehicle on arm ``a`` (along +x) at axis distances ``s`` and lateral positions
+    ``lat``, then across the box (-x)."""
+    f = arm_frames(topo)[a]
+    return Trajectory(tid, np.concatenate([f.point(s, lat), np.stack([-np.arange(1.0, 40.0), np.zeros(39)], 1)]))
+
+
+def test_an_entering_part_takes_the_lane_it_drives_at_the_stop_line():
+    """``assign_reach``: a vehicle that drives entering lane 1 far out and changes into lane 0
+    (a turn pocket) 25-30 m before the stop line belongs to the pocket lane, where its turn
+    starts; the mean of its whole part (paper §III-A, ``assign_reach`` inf) lies on the lane it
+    drove far out, which it left."""
+    topo, a, stops = _two_lane_arm()
+    f = arm_frames(topo)[a]
+    s = np.arange(110.0, -0.5, -1.0)
+    lat = np.interp(s, [stops[a] + 25.0, stops[a] + 30.0], [f.lat[(ENTERING, 0)], f.lat[(ENTERING, 1)]])
     for reach, lane in ((LaneConfig().assign_reach, (a, 0)), (float('inf'), (a, 1))):
-        tr = _pocket_track(topo, a, stop)
+        tr = _approach(topo, a, s, lat)
         assign_parts([tr], topo, LaneConfig(assign_reach=reach))
         assert tr.lane_in == lane
 
@@ -156,16 +163,11 @@ def test_the_lanes_are_fitted_where_their_parts_were_assigned():
     """``fit_frames`` places an entering lane by the same window as the assignment: an
     approach whose traffic drifts up to 4 m sideways beyond 35 m (a curve) leaves the lane where
     the vehicles drive next to the stop line; the whole parts' mean put it 1 m off."""
-    topo = Intersection(center=[0.0, 0.0], arms=[Arm(angle=0.0, lanes_in=2), Arm(angle=np.pi / 2),
-                                                   Arm(angle=np.pi), Arm(angle=-np.pi / 2)])
-    a = next(i for i, arm in enumerate(topo.arms) if arm.lanes_in == 2)
-    stops = stop_distances(topo, LaneConfig())
-    f = arm_frames(topo)[a]
-    lat0 = f.lat[(ENTERING, 0)]
+    topo, a, stops = _two_lane_arm()
+    lat0 = arm_frames(topo)[a].lat[(ENTERING, 0)]
     s = np.arange(stops[a] + 70.0, -0.5, -1.0)
     lat = lat0 + np.interp(s, [stops[a] + 35.0, stops[a] + 70.0], [0.0, 4.0])
-    trajs = [Trajectory(k, np.concatenate([f.point(s, lat), np.stack([-np.arange(1.0, 40.0), np.zeros(39)], 1)]))
-             for k in range(4)]
+    trajs = [_approach(topo, a, s, lat, k) for k in range(4)]
     got = {}
     for reach in (LaneConfig().assign_reach, float('inf')):
         cfg = LaneConfig(assign_reach=reach, max_refit_angle_deg=0.0)   # lane positions only
