@@ -15,6 +15,7 @@ from lanelet2.traffic_rules import Locations, Participants, create  # noqa: E402
 from intersection_estimator.export.osm import (  # noqa: E402
     DEFAULT_ORIGIN, MERGE_TOL, load_osm, parse_origin, read_origin, turn_direction, write_osm)
 from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator  # noqa: E402
+from intersection_estimator.model import Lanelet  # noqa: E402
 from intersection_estimator.pipeline import estimate  # noqa: E402
 from intersection_estimator.sim import simulate_scenario  # noqa: E402
 
@@ -182,6 +183,38 @@ def test_bad_origin_refused_naming_it(tmp_path):
         parse_origin('48.1')
     with pytest.raises(ValueError, match='--origin'):
         parse_origin('48.1,east')
+
+
+def _tight_right_turn(turn_deg: float, radius: float, width: float = 3.5) -> list:
+    """Entering lane -> connector turning right by ``turn_deg`` on ``radius`` -> leaving lane,
+    borders offset +-width/2 from one center line (the inner border of a turn tighter than
+    half the width folds back over itself, as SUMO's internal lanes and offset estimates do)."""
+    a = np.radians(turn_deg)
+    th = np.linspace(np.pi / 2, np.pi / 2 - a, 8)
+    turn = np.array([0.0, -radius]) + radius * np.stack([np.cos(th), np.sin(th)], 1)
+    out = turn[-1] + np.linspace(0.0, 30.0, 31)[:, None] * np.array([np.cos(-a), np.sin(-a)])
+    center = np.vstack([np.stack([np.linspace(-30.0, 0.0, 31), np.zeros(31)], 1), turn[1:], out[1:]])
+    t = np.gradient(center, axis=0)
+    n = np.stack([-t[:, 1], t[:, 0]], 1) / np.hypot(*t.T)[:, None]
+    left, right = center + 0.5 * width * n, center - 0.5 * width * n
+    cut = [(0, 30), (30, 37), (37, len(center) - 1)]
+    kinds = [('in', 'entering', ['c']), ('c', 'connector', ['out']), ('out', 'leaving', [])]
+    return [Lanelet(i, k, 0, left[a_:b_ + 1], right[a_:b_ + 1], center[a_:b_ + 1], succ)
+            for (i, k, succ), (a_, b_) in zip(kinds, cut)]
+
+
+@pytest.mark.parametrize('turn_deg, radius', [(120, 1.25), (135, 1.0), (165, 1.25)])
+def test_a_tight_turn_keeps_its_route(tmp_path, turn_deg, radius):
+    """The folded inner border of a tight turn must not turn the connector's right border
+    round when lanelet2 loads the map (the routing graph lost 78 of 3912 SUMO turns so)."""
+    lls = _tight_right_turn(turn_deg, radius)
+    _, n = _check_routes(lls, tmp_path / 'tight.osm')
+    assert n == 1
+    m = load_osm(tmp_path / 'tight.osm')
+    c = next(ll for ll in m.laneletLayer if ll.attributes['ie:id'] == 'c')
+    for bound, mine in ((c.leftBound, lls[1].left), (c.rightBound, lls[1].right)):
+        assert np.allclose([bound[0].x, bound[0].y], mine[0], atol=1e-3)
+        assert np.allclose([bound[-1].x, bound[-1].y], mine[-1], atol=1e-3)
 
 
 def test_turn_direction():

@@ -12,6 +12,14 @@
   :data:`MERGE_TOL` (an estimate may leave them a few cm apart), their points are merged
   into one node each (at the mean position), so the two lanelets reference one
   linestring and lanelet2's RoutingGraph offers a lane change between them.
+* lanelet2's loader orients each lanelet's borders by their middle vertices (``geometry::
+  align``: the right border's middle vertex must lie right of the left border, the left
+  border's left of the right one; else it inverts a border). The inner border of a turn
+  tighter than half the lane width, offset from its center line, folds back over itself, its
+  middle vertex lies on the wrong side, and the loaded connector's right border ran
+  backwards -- the routing graph dropped the turn (78 of 3912 SUMO connectors). A border
+  whose middle vertex would mislead the loader gets a point of the right side at its middle
+  index instead (:func:`_aligned`; the geometry is unchanged).
 * Line types: borders of connectors (inside the intersection) are ``virtual``; a
   border shared by two lanes of the same direction is ``line_thin``/``dashed`` (lane
   change allowed); other borders -- the median, the road edge -- ``line_thin``/``solid``.
@@ -27,6 +35,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 from pathlib import Path
 import re
@@ -88,6 +97,54 @@ def turn_direction(center: np.ndarray) -> str:
     return 'left' if turn > 0 else 'right'
 
 
+def _signed(line: np.ndarray, p: np.ndarray) -> float:
+    """lanelet2's signed distance of ``p`` to ``line`` (left > 0), as its loader computes it."""
+    from lanelet2.core import BasicPoint2d, LineString3d, Point3d
+    from lanelet2.geometry import to2D, toArcCoordinates
+    ls = LineString3d(0, [Point3d(0, float(x), float(y), 0.0) for x, y in line])
+    return toArcCoordinates(to2D(ls), BasicPoint2d(float(p[0]), float(p[1]))).distance
+
+
+def _middle(line: np.ndarray) -> np.ndarray:
+    return line[len(line) // 2] if len(line) > 2 else 0.5 * (line[0] + line[-1])
+
+
+def _centred(line: np.ndarray, other: np.ndarray, side: float, step: float = 0.1) -> np.ndarray:
+    """``line`` with a point of the ``side`` (+1 left, -1 right) of ``other`` at its middle
+    index: the one nearest its half length, inserted on its segment, and the segments on the
+    side with fewer vertices split at their midpoints until it sits there (unchanged when its
+    middle vertex already lies there, or when no point of it does)."""
+    if side * _signed(other, _middle(line)) > 0:
+        return line
+    seg = np.hypot(*np.diff(line, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    q = np.linspace(0.0, s[-1], max(3, int(s[-1] / step) + 1))[1:-1]
+    cand = np.stack([np.interp(q, s, line[:, 0]), np.interp(q, s, line[:, 1])], 1)
+    good = np.flatnonzero([side * _signed(other, c) > 0 for c in cand])
+    if not len(good):
+        return line
+    k = good[np.argmin(np.abs(q[good] - 0.5 * s[-1]))]
+    j = int(np.searchsorted(s, q[k], 'right'))            # the point goes before vertex j
+    before, after = list(line[:j]), list(line[j:])
+    while len(before) != len(after):                     # split the fewer side's longest segment
+        part = before if len(before) < len(after) else after
+        ends = part + [cand[k]] if part is before else [cand[k]] + part
+        i = int(np.argmax(np.hypot(*np.diff(np.array(ends), axis=0).T)))
+        part.insert(i + 1 if part is before else i, 0.5 * (ends[i] + ends[i + 1]))
+    return np.array(before + [cand[k]] + after)
+
+
+def _aligned(l):
+    """``l`` with borders whose middle vertices lanelet2's loader reads the right way round
+    (module doc)."""
+    left, right = np.asarray(l.left, float), np.asarray(l.right, float)
+    if len(left) < 2 or len(right) < 2:
+        return l
+    right = _centred(right, left, -1.0)
+    left = _centred(left, right, +1.0)
+    return replace(l, left=left, right=right)
+
+
 def _key(p) -> tuple:
     return (int(round(float(p[0]) / _QUANT)), int(round(float(p[1]) / _QUANT)))
 
@@ -145,6 +202,7 @@ def _lanelet_map(lanelets):
     from lanelet2.core import Lanelet as LL
 
     ids = iter(range(1, 1 << 62))
+    lanelets = [_aligned(l) for l in lanelets]
     nodes = _Nodes(lanelets, _merge_pairs(lanelets))
     pos = nodes.positions()
     points: dict = {}
