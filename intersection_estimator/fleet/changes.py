@@ -67,7 +67,7 @@ from scipy.stats import beta as beta_dist
 from ..evaluate import _cost_matrix, lane_distance, resample
 from ..model import ENTERING, LEAVING
 from ..ranges import check_table
-from .corroborate import refutes
+from .corroborate import FOLLOW_SHARE, refutes
 from .match import ARM_GATE_DEG, GATE_M, match_arms
 
 __all__ = ['KINDS', 'ChangeConfig', 'Finding', 'DriveView', 'compare', 'arm_passages']
@@ -89,7 +89,9 @@ _RANGES = {'gate_m': ('(0, inf)', 'estimate <-> mapped intersection gate [m]'),
            'turn_absence': ('[0, 1]', "1: a missing lane's evidence is the vehicles of the turns it serves"),
            'corroborate': ('[0, 1]', "1: claims the drive's map-matched vehicles contradict are dropped"),
            'match_gate_m': ('(0, inf)', 'a vehicle is on a mapped lane within this lateral distance [m]'),
-           'match_min_points': ('[1, inf)', 'positions (1 s averages) that make a vehicle a lane\'s traffic')}
+           'match_min_points': ('[1, inf)', 'positions (1 s averages) that make a vehicle a lane\'s traffic'),
+           'turn_follow': ('[0, 1]', 'a vehicle that followed a mapped turn past this share of it took '
+                           'it, whatever lane beside it left on (0: off)')}
 
 
 @dataclass(frozen=True)
@@ -121,6 +123,8 @@ class ChangeConfig:
     corroborate: int = 1
     match_gate_m: float = 1.75
     match_min_points: int = 5
+    # a lane change right after the box is no turn the map lacks (corroborate.FOLLOW_SHARE)
+    turn_follow: float = FOLLOW_SHARE
 
     def validate(self) -> None:
         check_table(self, _RANGES, 'ChangeConfig')

@@ -152,8 +152,8 @@ def test_a_queued_vehicle_uses_its_lane_a_parked_one_does_not(tmp_path, cases):
     u = co._headings(q, t)
     standing = ~np.isfinite(u[:, 0])
     assert standing.sum() > 100
-    with_queue, _ = co._match_points(q, u, standing, cKDTree(P), T, I, lane, 1.75)
-    without, _ = co._match_points(q, u, np.zeros(len(q), bool), cKDTree(P), T, I, lane, 1.75)
+    with_queue, _, _ = co._match_points(q, u, standing, cKDTree(P), T, I, lane, 1.75)
+    without, _, _ = co._match_points(q, u, np.zeros(len(q), bool), cKDTree(P), T, I, lane, 1.75)
     ids = np.array([el.id for el in els])
     assert (ids[with_queue[standing]] == a.id).all() and (without[standing] == -1).all()
     tr = match_traffic([(parked + rng.normal(0, 0.3, parked.shape), t)], X, 1.75, 5)
@@ -163,7 +163,7 @@ def test_a_queued_vehicle_uses_its_lane_a_parked_one_does_not(tmp_path, cases):
     c = np.asarray(a.center, float)
     out = (c[0] - c[1]) / np.hypot(*(c[0] - c[1]))
     beyond = c[0] + np.linspace(3.0, 12.0, 50)[:, None] * out
-    m, _ = co._match_points(beyond, np.full_like(beyond, np.nan), np.ones(len(beyond), bool), cKDTree(P), T, I,
+    m, _, _ = co._match_points(beyond, np.full_like(beyond, np.nan), np.ones(len(beyond), bool), cKDTree(P), T, I,
                             lane, 1.75)
     assert (m == -1).all()
 
@@ -201,3 +201,25 @@ def test_a_vehicle_seen_in_the_box_only_chose_no_lane():
     entering = co.TrafficOnMap()
     co._count(entering, els, np.array([0] * 8 + [2] * 12), np.zeros(20), 5, arm_of, {})
     assert entering.lane_turns == {('in0', 1): 1}
+
+
+def test_a_lane_change_after_a_mapped_turn_is_that_turn():
+    """A vehicle that followed the mapped turn in0 -> out0 to 90 % of its length and then left
+    on out1 beside out0 took the mapped turn and changed lanes after the box: no turn the map
+    lacks. One that left the mapped turn after 30 % of it drove a turn the map lacks."""
+    from intersection_estimator.fleet import corroborate as co
+    z = np.zeros((2, 2))
+    els = [co._Element('in0', 0, ENTERING, z), co._Element('out0', 1, LEAVING, z), co._Element('out1', 1, LEAVING, z),
+           co._Element('c', 0, 0, z, ('in0', 'out0'))]
+    arm_of = {e.id: e.arm for e in els if e.direction}
+    match = np.array([0] * 10 + [3] * 10 + [2] * 10)
+
+    def turns(reach, share):
+        along = np.where(match == 3, np.tile(np.linspace(0.0, reach, 10), 3), 0.0)
+        tr = co.TrafficOnMap()
+        co._count(tr, els, match, np.zeros(len(match)), 5, arm_of, {}, co._Follow(els, arm_of, share).at(along))
+        return tr.turns
+
+    assert turns(0.9, co.FOLLOW_SHARE) == {('in0', 'out0')}
+    assert turns(0.3, co.FOLLOW_SHARE) == {('in0', 'out1')}
+    assert turns(0.9, 0.95) == {('in0', 'out1')}
