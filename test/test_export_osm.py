@@ -13,7 +13,7 @@ from lanelet2.routing import RoutingGraph  # noqa: E402
 from lanelet2.traffic_rules import Locations, Participants, create  # noqa: E402
 
 from intersection_estimator.export.osm import (  # noqa: E402
-    DEFAULT_ORIGIN, MERGE_TOL, load_osm, parse_origin, read_origin, turn_direction, write_osm)
+    DEFAULT_ORIGIN, MERGE_TOL, _Signed, load_osm, parse_origin, read_origin, turn_direction, write_osm)
 from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator  # noqa: E402
 from intersection_estimator.model import Lanelet  # noqa: E402
 from intersection_estimator.pipeline import estimate  # noqa: E402
@@ -215,6 +215,20 @@ def test_a_tight_turn_keeps_its_route(tmp_path, turn_deg, radius):
     for bound, mine in ((c.leftBound, lls[1].left), (c.rightBound, lls[1].right)):
         assert np.allclose([bound[0].x, bound[0].y], mine[0], atol=1e-3)
         assert np.allclose([bound[-1].x, bound[-1].y], mine[-1], atol=1e-3)
+
+
+def test_the_side_of_a_border_is_lanelet2s():
+    """The writer's signed distance (left > 0) of points to a border is lanelet2's, also at
+    the vertices of a folded border and at the other border's vertices."""
+    from lanelet2.core import BasicPoint2d, LineString3d, Point3d
+    from lanelet2.geometry import to2D, toArcCoordinates
+    rng = np.random.default_rng(0)
+    for l in _tight_right_turn(135, 1.0) + _tight_right_turn(90, 3.0):
+        for line, other in ((np.asarray(l.left), np.asarray(l.right)), (np.asarray(l.right), np.asarray(l.left))):
+            pts = np.concatenate([rng.normal(line.mean(0), 4.0, (40, 2)), other, line + rng.normal(0, 0.5, line.shape)])
+            ls = to2D(LineString3d(0, [Point3d(0, float(x), float(y), 0.0) for x, y in line]))
+            want = np.array([toArcCoordinates(ls, BasicPoint2d(*p)).distance for p in pts])
+            np.testing.assert_allclose(_Signed(line)(pts), want, atol=1e-9)
 
 
 def test_turn_direction():

@@ -51,7 +51,7 @@ The vehicles' turns on the map also give the turn counts of the lane-absence rul
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 
 import numpy as np
@@ -272,14 +272,16 @@ class _Follow:
     elements: list
     arm_of: dict
     share: float
+    mapped: frozenset = frozenset()      # the mapped turns
     along: np.ndarray | None = None      # per position of one vehicle: how far along its element
 
     def __post_init__(self):
-        self.mapped = {el.turn for el in self.elements if not el.direction}
+        if not self.mapped:
+            self.mapped = frozenset(el.turn for el in self.elements if not el.direction)
 
     def at(self, along: np.ndarray) -> '_Follow':
         """This rule for one vehicle."""
-        return _Follow(self.elements, self.arm_of, self.share, along)
+        return replace(self, along=along)
 
     def __call__(self, turn: tuple, at: dict) -> tuple:
         """``turn``, or the mapped turn from its entering lane to a lane of its leaving arm that
