@@ -132,7 +132,7 @@ class LaneConfig:
     traffic_smooth_steps: int = 4
     traffic_noise: int = 1
     traffic_min_points: int = 10
-    traffic_select: float = 2.0
+    traffic_select: float = 1.0      # docs/real_junctions.md, "Connectors: half the penalty for the traffic's shape"
     follow_lanes: int = 1
     skip_labels: tuple = (6, 7)
     follow_ctrl_spacing: float = 10.0

@@ -24,7 +24,10 @@ Meyer, Walter, Lauer 2020 (arXiv 2007.06904) fit 1-D cubic B-splines to the traf
    paper, which fixes it);
 3. the curve is sampled at equal arc length (``spacing``) -- the connector's stations;
 4. it replaces the start shape only where it explains the traffic better by more than
-   ``traffic_select`` per free parameter (:func:`prefer_fit`; 2 = Akaike's criterion).
+   ``traffic_select`` per free parameter (:func:`prefer_fit`; 2 = Akaike's criterion; the
+   default 1 asks half of it: the start shape is the Table I simulator's own curve family,
+   which Akaike's criterion kept on SUMO's real junctions where the traffic's shape was
+   closer to the truth, ``docs/real_junctions.md``).
 
 Too little traffic (fewer than ``min_points`` points in the pieces) or a degenerate fit
 returns None and the caller keeps its own start shape.
