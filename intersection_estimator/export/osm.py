@@ -98,39 +98,20 @@ def turn_direction(center: np.ndarray) -> str:
 
 
 class _Signed:
-    """lanelet2's signed distance (left > 0) of points to ``line``, as its loader computes it:
-    the side of the nearest segment where the foot point lies inside it (the common case,
-    computed here), else lanelet2's own rule for a foot at a vertex (asked of lanelet2, whose
-    linestring is built once)."""
+    """lanelet2's signed distance (left > 0) of points to ``line``, as its loader computes it
+    (its own ``toArcCoordinates``; the linestring is built once)."""
 
     def __init__(self, line: np.ndarray):
-        self.a, self.ab = line[:-1], np.diff(line, axis=0)
-        self.line, self._ls = line, None
+        from lanelet2.core import LineString3d, Point3d
+        from lanelet2.geometry import to2D
+        self._ls = to2D(LineString3d(0, [Point3d(0, float(x), float(y), 0.0) for x, y in line]))
 
     def __call__(self, P: np.ndarray) -> np.ndarray:
         """Signed distances of the points ``P`` (m, 2)."""
-        P = np.atleast_2d(P)
-        a, ab = self.a[None], self.ab[None]
-        rel = P[:, None, :] - a
-        t = np.einsum('mij,mij->mi', rel, np.broadcast_to(ab, rel.shape)) / np.maximum(
-            np.einsum('ij,ij->i', self.ab, self.ab), 1e-12)
-        d = np.hypot(*(rel - np.clip(t, 0.0, 1.0)[..., None] * ab).transpose(2, 0, 1))
-        i = np.argmin(d, axis=1)
-        rows = np.arange(len(P))
-        ti, di = t[rows, i], d[rows, i]
-        cross = ab[0, i, 0] * rel[rows, i, 1] - ab[0, i, 1] * rel[rows, i, 0]
-        out = np.where(cross > 0, di, -di)
-        plain = (ti > 1e-9) & (ti < 1.0 - 1e-9) & (np.sum(d <= di[:, None] + 1e-9, axis=1) == 1)
-        for k in np.flatnonzero(~plain):
-            out[k] = self._lanelet2(P[k])
-        return out
-
-    def _lanelet2(self, p: np.ndarray) -> float:
-        from lanelet2.core import BasicPoint2d, LineString3d, Point3d
-        from lanelet2.geometry import to2D, toArcCoordinates
-        if self._ls is None:
-            self._ls = to2D(LineString3d(0, [Point3d(0, float(x), float(y), 0.0) for x, y in self.line]))
-        return toArcCoordinates(self._ls, BasicPoint2d(float(p[0]), float(p[1]))).distance
+        from lanelet2.core import BasicPoint2d
+        from lanelet2.geometry import toArcCoordinates
+        return np.array([toArcCoordinates(self._ls, BasicPoint2d(float(x), float(y))).distance
+                         for x, y in np.atleast_2d(P)])
 
 
 def _middle(line: np.ndarray) -> np.ndarray:

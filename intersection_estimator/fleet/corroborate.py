@@ -133,12 +133,13 @@ def _samples(elements):
 
 
 def _fractions(I: np.ndarray) -> np.ndarray:
-    """Per sample of :func:`_samples`: how far along its element it lies (0 start, 1 end)."""
-    out = np.zeros(len(I))
-    for i in np.unique(I):
-        k = np.flatnonzero(I == i)
-        out[k] = np.linspace(0.0, 1.0, len(k)) if len(k) > 1 else 1.0
-    return out
+    """Per sample of :func:`_samples`: how far along its element it lies (0 start, 1 end;
+    an element's samples are consecutive)."""
+    start = np.flatnonzero(np.r_[True, I[1:] != I[:-1]])
+    count = np.diff(np.r_[start, len(I)])
+    first = np.repeat(start, count)
+    last = np.repeat(count - 1, count)
+    return np.where(last > 0, (np.arange(len(I)) - first) / np.maximum(last, 1), 1.0)
 
 
 def _window(t: np.ndarray, half: float):
