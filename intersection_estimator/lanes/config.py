@@ -54,6 +54,13 @@ _RANGES = {
                         'constant offset per leaving lane, 0 none'),
     'follow_reassign': ('[0, 1]', '1: the parts of a bent direction are re-assigned to its lanes '
                         'by their offset from the shifted axis'),
+    'halt_stops': ('[0, 1]', '1: stop lines moved in to where the vehicles halt (lanes/halts.py)'),
+    'halt_follow': ('[0, 1]', '1: each halted vehicle is one point of its entering lane in the '
+                    'follow fit (lanes/halts.py, lanes/follow.py)'),
+    'halt_speed': ('(0.0, 5.0]', 'a vehicle slower than this halts [m/s]'),
+    'halt_min_s': ('(0.0, 60.0]', 'a halt lasts at least this long [s]'),
+    'halt_pair_m': ('[0.0, 20.0]', 'a halt is the stop line when another vehicle halted within '
+                    'this along the arm [m]'),
     'stop_fit': ('[0, 1]', '1: fit the stop distances to the turning traffic (lanes/stops.py)'),
     'stop_search': ('[0.0, 20.0]', 'search range around the geometric stop distance [m]'),
     'stop_step': ('[0.01, 5.0]', 'grid step of the stop-distance search [m]'),
@@ -146,6 +153,12 @@ class LaneConfig:
     follow_corr_length: float = 4.0
     follow_per_lane: int = 3
     follow_reassign: int = 1
+    halt_stops: int = 0              # docs/real_junctions.md, "Halted vehicles: stop lines and lanes"
+    # (off: the lanes reach the line, but their last metres lose more than recall gains)
+    halt_follow: int = 1
+    halt_speed: float = 0.5
+    halt_min_s: float = 2.0
+    halt_pair_m: float = 2.0
     stop_fit: int = 1
     stop_search: float = 2.0
     stop_step: float = 0.25

@@ -25,6 +25,7 @@ from .mcmc import run_chain
 from .model import LaneGraph, build_graph
 from .prior import all_angles, angle_csr, log_prior
 from .refine import refine_offsets
+from .halts import halt_positions, halt_stops
 from .stops import complete_partial, fit_stops
 
 __all__ = ['LaneCourseEstimator', 'lanelets_from_topology']
@@ -144,9 +145,9 @@ class LaneCourseEstimator:
         traffic. The current lanelets and chain stand until :meth:`finish`."""
         t0 = time.perf_counter()
         given, topology = topology, chord_arms(topology)
-        trajs, frames, stops = self._preprocess(topology, dets)
+        trajs, frames, stops, halts = self._preprocess(topology, dets)
         specs, pairs, index = lane_specs(topology, trajs, self.config, connectors=False,
-                                         stops=stops, frames=frames)
+                                         stops=stops, frames=frames, halts=halts)
         self._pending = (given, topology, trajs, stops, specs, pairs, index)
         self.halves['prepare'] = time.perf_counter() - t0
 
@@ -179,10 +180,15 @@ class LaneCourseEstimator:
             self.config.warm_tolerance
 
     def _preprocess(self, topology: Intersection, dets: Detections | None):
-        """Trajectories split and assigned, arm frames re-fitted, stop lines fitted."""
+        """Trajectories split and assigned, arm frames re-fitted, stop lines fitted; the
+        halted vehicles (``lanes/halts.py``; None when both halt steps are off)."""
         cfg = self.config
         trajs = trajectories(dets, cfg.skip_labels)
         stops = stop_distances(topology, cfg)
+        halts = halt_positions(dets, cfg.skip_labels, cfg.halt_speed, cfg.halt_min_s) \
+            if cfg.halt_stops or cfg.halt_follow else None
+        if cfg.halt_stops:
+            stops = halt_stops(arm_frames(topology), stops, halts, cfg.halt_pair_m, cfg.stop_min)
         assign_parts(trajs, topology, cfg, stops)
         frames = arm_frames(topology)
         for _ in range(cfg.refit_lanes):
@@ -195,7 +201,7 @@ class LaneCourseEstimator:
             stops = fit_stops(topology, frames, trajs, stops, cfg.stop_search, cfg.stop_step,
                               float(stops.max(initial=0.0)) + 20.0, cfg.stop_clip,
                               cfg.stop_sweeps)
-        return trajs, frames, stops
+        return trajs, frames, stops, halts
 
     def _setup_graph(self) -> None:
         """Optional LS refinement of the start, prior means, neighbour pairs, caches."""

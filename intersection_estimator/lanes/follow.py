@@ -69,7 +69,7 @@ from .spline import _data, aic_prefers, moving_average, second_differences
 FOOT_STEPS = 2
 
 __all__ = ['OffsetFit', 'fit_offset', 'select_offset', 'select_constant', 'nearest_lanes',
-           'driven_lanes', 'arm_shift', 'follow_borders']
+           'driven_lanes', 'with_points', 'arm_shift', 'follow_borders']
 
 
 class OffsetFit:
@@ -345,6 +345,23 @@ def driven_lanes(parts, frame, lo: float, hi: float, cfg) -> list:
     """Per lane ``(points (m, 2), weights (m,) [m])`` of its trajectory parts between ``lo``
     and ``hi`` (:func:`_driven`); ``parts``: per lane a list of parts ((m, 2), time order)."""
     return [_driven(p, frame, lo, hi, cfg) for p in parts]
+
+
+def with_points(frame, g: OffsetFit | None, lats, lanes, P: np.ndarray, weight: float,
+                lo: float, hi: float) -> list:
+    """``lanes`` (:func:`driven_lanes`) with the points ``P`` (m, 2) added, each of
+    ``weight`` [m], to the lane nearest its offset from the axis shifted by ``g``
+    (the straight frame when None): observations of a lane that carry no metres driven,
+    such as halted vehicles (``lanes/halts.py``)."""
+    lanes = [(np.asarray(Q, float).reshape(-1, 2), np.asarray(w, float)) for Q, w in lanes]
+    if not len(P):
+        return lanes
+    _, off = _signed_offsets(P, frame, g, lo, hi)
+    k = np.argmin(np.abs(np.asarray(lats, float)[None, :] - off[:, None]), axis=1)
+    for j in np.unique(k):
+        Q, w = lanes[j]
+        lanes[j] = (np.concatenate([Q, P[k == j]]), np.concatenate([w, np.full((k == j).sum(), weight)]))
+    return lanes
 
 
 def arm_shift(frame, lats, lanes, lo: float, hi: float, cfg) -> OffsetFit | None:

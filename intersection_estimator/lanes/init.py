@@ -29,7 +29,8 @@ from ..model import ENTERING, LEAVING, Intersection
 from ..observations import Detections
 from .config import LaneConfig
 from .model import LaneletSpec
-from .follow import arm_shift, driven_lanes, follow_borders, nearest_lanes
+from .follow import arm_shift, driven_lanes, follow_borders, nearest_lanes, with_points
+from .halts import entering_halts
 from .spline import noise_variance, traffic_connector
 
 __all__ = ['Trajectory', 'trajectories', 'split_at_center', 'stop_distances', 'assign_parts',
@@ -382,7 +383,7 @@ def _lane_points(trajs) -> dict:
     return out
 
 
-def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=()) -> tuple[dict, dict]:
+def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=(), halts=None) -> tuple[dict, dict]:
     """direction -> common lateral shift of its lanes fitted to their traffic
     (``lanes/follow.py``; None: straight), and direction -> that traffic per lane
     (``follow.driven_lanes``). With ``follow_reassign`` the parts of a direction whose axis
@@ -390,22 +391,30 @@ def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=()) -> tuple[dict,
     ``lane_pts`` and the trajectories). The shift is not refitted: the parts that move lie
     about a lane width from the lane they had, mostly beyond ``follow_gate``, and barely
     shaped it (refitted: SUMO dev 100-129 / 130-159 lanes 27.7 / 29.0 cm instead of 27.9 /
-    28.9)."""
-    if not cfg.follow_lanes or not lane_pts:
+    28.9). ``halts`` (``lanes/halts.py``, ``halt_follow``): the halted vehicles, one point
+    each of the entering lane nearest them."""
+    if not cfg.follow_lanes or not (lane_pts or halts is not None and len(halts[0])):
         return {}, {}
     out, driven = {}, {}
     for d, ext in exts.items():
         n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
         lats = [f.lat[(d, k)] for k in range(n_lanes)]
         parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
-        if not any(parts):
+        held = entering_halts(f, halts, stop, stop + ext) \
+            if d == ENTERING and halts is not None and cfg.halt_follow else np.zeros((0, 2))
+        if not any(parts) and not len(held):
             continue
         driven[d] = driven_lanes(parts, f, stop, stop + ext, cfg)
         out[d] = arm_shift(f, lats, driven[d], stop, stop + ext, cfg)
+        if len(held):       # halted vehicles: one observation each, placed along the shift
+            driven[d] = with_points(f, out[d], lats, driven[d], held, cfg.follow_corr_length,
+                                    stop, stop + ext)
+            out[d] = arm_shift(f, lats, driven[d], stop, stop + ext, cfg)
         if cfg.follow_reassign and n_lanes > 1 and out[d] is not None and \
                 _reassign(trajs, f, out[d], ai, d, lats, stop, stop + ext, lane_pts, cfg):
             parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
-            driven[d] = driven_lanes(parts, f, stop, stop + ext, cfg)
+            driven[d] = with_points(f, out[d], lats, driven_lanes(parts, f, stop, stop + ext, cfg),
+                                    held, cfg.follow_corr_length, stop, stop + ext)
     return out, driven
 
 
@@ -460,7 +469,7 @@ def _arm_borders(f, d, b, stop, ext, n_st, n_lanes, cfg, shifts, driven):
     return np.stack([f.point(s, bj) for bj in b])
 
 
-def _straight_lanes(topo, frames, stops, trajs, cfg, length):
+def _straight_lanes(topo, frames, stops, trajs, cfg, length, halts=None):
     """Entering/leaving specs and the interior neighbour pairs of each arm."""
     specs, pairs, index = [], [], {}
     far = _farthest(trajs, frames) if length is None else {}
@@ -469,7 +478,7 @@ def _straight_lanes(topo, frames, stops, trajs, cfg, length):
         f = frames[ai]
         exts = {d: _extent(far, ai, d, stops[ai], cfg, length) for d in (ENTERING, LEAVING)
                 if (a.lanes_in if d == ENTERING else a.lanes_out) > 0}
-        shifts, driven = _follow_shifts(f, a, ai, stops[ai], exts, lane_pts, cfg, trajs)
+        shifts, driven = _follow_shifts(f, a, ai, stops[ai], exts, lane_pts, cfg, trajs, halts)
         for d in (ENTERING, LEAVING):
             n_lanes = a.lanes_in if d == ENTERING else a.lanes_out
             if n_lanes <= 0:
@@ -589,13 +598,15 @@ def _connector_borders(E: LaneletSpec, O: LaneletSpec, cfg: LaneConfig):
 
 
 def lane_specs(topo: Intersection, trajs: list[Trajectory], cfg: LaneConfig,
-               length: float | None = None, connectors: bool = True, stops=None, frames=None):
+               length: float | None = None, connectors: bool = True, stops=None, frames=None,
+               halts=None):
     """Specs of all entering/leaving lanelets and (``connectors``) the evidenced
     connectors (:func:`add_connectors`); also the interior neighbour pairs and the index
-    ``(arm, direction, k) -> spec``."""
+    ``(arm, direction, k) -> spec``. ``halts``: the halted vehicles
+    (``halts.halt_positions``) that shape the entering lanes too."""
     stops = stop_distances(topo, cfg) if stops is None else stops
     frames = arm_frames(topo) if frames is None else frames
-    specs, pairs, index = _straight_lanes(topo, frames, stops, trajs, cfg, length)
+    specs, pairs, index = _straight_lanes(topo, frames, stops, trajs, cfg, length, halts)
     if connectors:
         add_connectors(specs, index, trajs, cfg)
     return specs, pairs, index
