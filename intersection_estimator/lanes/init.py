@@ -404,12 +404,10 @@ def _follow_shifts(f, a, ai, stop, exts, lane_pts, cfg, trajs=(), halts=None) ->
             if d == ENTERING and halts is not None and cfg.halt_follow else np.zeros((0, 2))
         if not any(parts) and not len(held):
             continue
-        driven[d] = driven_lanes(parts, f, stop, stop + ext, cfg)
+        # halted vehicles: one observation each, on the lane nearest them
+        driven[d] = with_points(f, None, lats, driven_lanes(parts, f, stop, stop + ext, cfg),
+                                held, cfg.follow_corr_length, stop, stop + ext)
         out[d] = arm_shift(f, lats, driven[d], stop, stop + ext, cfg)
-        if len(held):       # halted vehicles: one observation each, placed along the shift
-            driven[d] = with_points(f, out[d], lats, driven[d], held, cfg.follow_corr_length,
-                                    stop, stop + ext)
-            out[d] = arm_shift(f, lats, driven[d], stop, stop + ext, cfg)
         if cfg.follow_reassign and n_lanes > 1 and out[d] is not None and \
                 _reassign(trajs, f, out[d], ai, d, lats, stop, stop + ext, lane_pts, cfg):
             parts = [lane_pts.get((ai, d, k), []) for k in range(n_lanes)]
