@@ -1,4 +1,4 @@
-"""Stop lines where the vehicles halt (beyond the paper).
+"""Halted vehicles: where the stop lines are and where the entering lanes run (beyond the paper).
 
 An entering lane ends at its stop line, and its connectors start there (paper §III-A). The
 topology gives rays, not stop lines: ``init.stop_distances`` places them by the corner
@@ -6,7 +6,7 @@ geometry of neighbouring arms, and ``stops.fit_stops`` moves them a little (``st
 to the turning traffic. On real junctions that geometry puts them far out: skewed arms and
 wide approaches push the corner back, so lanes end 7 m (median; p90 21 m) before SUMO's
 stop lines and the connectors carry the last stretch of every approach
-(``docs/real_junctions.md``, "Stop lines where the vehicles halt").
+(``docs/real_junctions.md``, "Halted vehicles: stop lines and lanes").
 
 Vehicles show the line themselves: at a red light or a yield sign the first vehicle of each
 lane halts just behind it. So:
@@ -25,14 +25,18 @@ lane halts just behind it. So:
   and the gap a driver keeps); the line moves in only (:func:`halt_stops`): a queue
   standing farther out says nothing about where the lanes end.
 
-Without tracks (raw radar) or without confirmed halts an arm keeps the stop line it had.
+Without track identities or without confirmed halts an arm keeps the stop line it had.
+
+``halt_stops`` (off by default) moves the lines so. It gains recall, but on curved
+approaches the stretch the lanes gain runs beside its queue and the lane course loses more
+(the docs section above).
 
 The halted vehicles also show where the entering lanes run next to the box
-(:func:`entering_halts`): a queue that stood through a red phase is often the only traffic
-there, and the moving vehicles' points weigh the metres driven around them
-(``lanes/follow.py``), so a standing vehicle weighed nothing and a lane reaching to the new
-line ran straight where the queue curves. Each halt becomes one point of its lane in the
-follow fit, weighing ``follow_corr_length`` metres -- the metres of driving that count as
+(:func:`entering_halts`, ``halt_follow``, on): a queue that stood through a red phase is
+often the only traffic there, and the follow fit (``lanes/follow.py``) weighs each point by
+the metres driven around it, so a standing vehicle weighed nothing and the lanes ran
+straight past the curve its queue stands on. Each halt now becomes one point of the lane
+nearest it, weighing ``follow_corr_length`` metres -- the metres of driving that count as
 one observation there: a halted vehicle is one observation of where its lane runs.
 """
 
