@@ -88,6 +88,15 @@ class Detections:
         ok = np.isfinite(self.xy).all(axis=1) & np.isfinite(self.t)
         return self if ok.all() else self.subset(ok)
 
+    def track_mask(self, skip_labels=()) -> np.ndarray:
+        """Rows of identified road users (``track_id >= 0``) with a finite position and stamp,
+        without those whose classification label is in ``skip_labels``: the rows a lane's
+        traffic is read from (``lanes.init.track_rows``, ``lanes.halts``)."""
+        ok = (self.track_id >= 0) & np.isfinite(self.xy).all(axis=1) & np.isfinite(self.t)
+        if len(skip_labels):
+            ok &= ~np.isin(self.label, np.asarray(skip_labels, np.int64))
+        return ok
+
     @property
     def has_tracks(self) -> bool:
         return bool(len(self)) and bool((self.track_id >= 0).any())

@@ -68,6 +68,12 @@ def test_a_halt_is_a_stretch_slower_than_the_speed_for_long_enough():
     assert halt_positions(_track(1, _stops_at(12.0, 4.0), lat, f, speed=False))[2].tolist() == [1]
     assert len(halt_positions(_track(1, _stops_at(12.0, 4.0), lat, f, heading=False))[0]) == 0
     assert len(halt_positions(_track(1, _stops_at(12.0, 4.0), lat, f, label=6), skip_labels=(6,))[0]) == 0
+    # a row without a finite position is no lane traffic (``Detections.track_mask``): the halt
+    # is the one of the other rows, not NaN
+    bad = _track(1, _stops_at(12.0, 4.0), lat, f)
+    bad.xy[len(bad.xy) // 2] = np.nan
+    got = halt_positions(bad)[0]
+    assert len(got) == 1 and np.isfinite(got).all()
 
 
 def test_the_stop_line_is_the_first_halt_another_vehicle_confirms():

@@ -185,12 +185,12 @@ class LaneCourseEstimator:
         cfg = self.config
         trajs = trajectories(dets, cfg.skip_labels)
         stops = stop_distances(topology, cfg)
+        frames = arm_frames(topology)
         halts = halt_positions(dets, cfg.skip_labels, cfg.halt_speed, cfg.halt_min_s) \
             if cfg.halt_stops or cfg.halt_follow else None
         if cfg.halt_stops:
-            stops = halt_stops(arm_frames(topology), stops, halts, cfg.halt_pair_m, cfg.stop_min)
+            stops = halt_stops(frames, stops, halts, cfg.halt_pair_m, cfg.stop_min)
         assign_parts(trajs, topology, cfg, stops)
-        frames = arm_frames(topology)
         for _ in range(cfg.refit_lanes):
             frames = fit_frames(topology, trajs, stops, cfg)
             assign_parts(trajs, topology, cfg, stops, frames)

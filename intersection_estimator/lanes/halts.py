@@ -47,6 +47,7 @@ import math
 import numpy as np
 
 from ..observations import Detections
+from ..topology.preprocess import track_bounds
 
 __all__ = ['halt_positions', 'halt_stops', 'entering_halts', 'HALF_CAR_M', 'HEADING_DEG']
 
@@ -59,17 +60,6 @@ HEADING_DEG = 25.0
 SPEED_FILTER_S = 1.0
 #: without a speed column the speed is read from positions this far apart in time [s]
 POSITION_BASELINE_S = 2.0
-
-
-def _track_bounds(tid: np.ndarray):
-    """Per row (rows sorted by track, then time): the index of its track's first row and one
-    past its last."""
-    n = len(tid)
-    first = np.r_[True, tid[1:] != tid[:-1]]
-    lo = np.maximum.accumulate(np.where(first, np.arange(n), 0))
-    last = np.r_[tid[1:] != tid[:-1], True]
-    hi = np.minimum.accumulate(np.where(last, np.arange(n), n)[::-1])[::-1] + 1
-    return lo, hi
 
 
 def _speeds(key: np.ndarray, xy: np.ndarray, speed: np.ndarray, lo: np.ndarray, hi: np.ndarray):
@@ -106,16 +96,12 @@ def halt_positions(dets: Detections | None, skip_labels=(), max_speed: float = 0
     empty = (np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, np.int64))
     if dets is None or len(dets) == 0:
         return empty
-    keep = dets.track_id >= 0
-    if len(skip_labels):
-        keep &= ~np.isin(dets.label, np.asarray(skip_labels))
-    idx = np.flatnonzero(keep)
+    idx, starts, ends = track_bounds(dets, dets.track_mask(skip_labels))
     if len(idx) < 3:
         return empty
-    idx = idx[np.lexsort((dets.t[idx], dets.track_id[idx]))]
     tid, t, xy = dets.track_id[idx], dets.t[idx], dets.xy[idx]
-    lo, hi = _track_bounds(tid)
-    rank = np.cumsum(np.r_[0, tid[1:] != tid[:-1]])
+    rank = np.repeat(np.arange(len(starts)), ends - starts)       # each row's track
+    lo, hi = starts[rank], ends[rank]
     t0 = t - t.min()
     key = t0 + rank * (t0.max() + 10.0 * POSITION_BASELINE_S)
     same = np.diff(tid) == 0

@@ -54,9 +54,7 @@ def track_rows(dets: Detections | None, skip_labels=()) -> list[tuple[int, np.nd
     paper: road users that do not keep to a lane center, ``LaneConfig.skip_labels``)."""
     if dets is None or len(dets) == 0:
         return []
-    ok = (dets.track_id >= 0) & np.isfinite(dets.xy).all(axis=1) & np.isfinite(dets.t)
-    if len(skip_labels):
-        ok &= ~np.isin(dets.label, np.asarray(skip_labels, np.int64))
+    ok = dets.track_mask(skip_labels)
     if not ok.any():
         return []
     ids, xy, t = dets.track_id[ok], dets.xy[ok], dets.t[ok]
