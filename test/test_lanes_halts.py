@@ -86,12 +86,14 @@ def test_the_stop_line_is_the_first_halt_another_vehicle_confirms():
     lat0, lat1 = f.lat[(ENTERING, 0)], f.lat[(ENTERING, 1)]
     cfg = LaneConfig()
 
-    def line(*tracks):
+    def line(*tracks, max_move=math.inf):
         h = halt_positions(_merge(list(tracks)), cfg.skip_labels, cfg.halt_speed, cfg.halt_min_s)
-        return halt_stops(arm_frames(topo), stops, h, cfg.halt_pair_m, cfg.stop_min)[a]
+        return halt_stops(arm_frames(topo), stops, h, cfg.halt_pair_m, cfg.stop_min, max_move)[a]
 
     heads = (_track(1, _stops_at(8.0, 5.0), lat0, f), _track(2, _stops_at(8.5, 5.0), lat1, f))
     assert s0 > 12.0 and line(*heads) == pytest.approx(8.0 - HALF_CAR_M)
+    # ``halt_max_move``: the line moves in by that much at most
+    assert line(*heads, max_move=3.0) == pytest.approx(s0 - 3.0)
     in_box = _track(3, _stops_at(3.0, 5.0), lat0, f)
     assert line(*heads, in_box) == pytest.approx(8.0 - HALF_CAR_M)
     assert line(in_box) == s0
@@ -109,14 +111,15 @@ def test_the_stop_line_is_the_first_halt_another_vehicle_confirms():
 def test_the_entering_lanes_reach_the_halted_vehicles():
     """End to end: three lanes of vehicles halt 9 m from the center, then cross the box; the
     estimated entering lanelets end within a metre of the line the halts show, where the
-    corner geometry alone ended them at ``s0``; with ``halt_stops`` off they end there."""
+    corner geometry alone ended them at ``s0``; with ``halt_stops`` off they end there. (The
+    line moves 11 m here: ``halt_max_move`` raised to let it.)"""
     topo, a, s0 = _wide_junction()
     f = arm_frames(topo)[a]
     tracks = [_track(k, _stops_at(9.0 + 0.3 * k, 4.0), f.lat[(ENTERING, k % 3)], f) for k in range(6)]
     dets = _merge(tracks)
     ends = {}
     for on in (1, 0):
-        est = LaneCourseEstimator(LaneConfig(halt_stops=on), 0)
+        est = LaneCourseEstimator(LaneConfig(halt_stops=on, halt_max_move=20.0), 0)
         est.initialise(topo, dets)
         ends[on] = [float((l.center[-1] - f.origin) @ f.u) for l in est.lanelets
                     if l.kind == 'entering' and l.arm == a]

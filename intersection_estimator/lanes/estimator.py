@@ -189,7 +189,8 @@ class LaneCourseEstimator:
         halts = halt_positions(dets, cfg.skip_labels, cfg.halt_speed, cfg.halt_min_s) \
             if cfg.halt_stops or cfg.halt_follow else None
         if cfg.halt_stops:
-            stops = halt_stops(frames, stops, halts, cfg.halt_pair_m, cfg.stop_min)
+            stops = halt_stops(frames, stops, halts, cfg.halt_pair_m, cfg.stop_min,
+                               cfg.halt_max_move)
         assign_parts(trajs, topology, cfg, stops)
         for _ in range(cfg.refit_lanes):
             frames = fit_frames(topology, trajs, stops, cfg)

@@ -27,9 +27,10 @@ lane halts just behind it. So:
 
 Without track identities or without confirmed halts an arm keeps the stop line it had.
 
-``halt_stops`` (off by default) moves the lines so. It gains recall, but on curved
-approaches the stretch the lanes gain runs beside its queue and the lane course loses more
-(the docs section above).
+``halt_stops`` (off by default) moves the lines so, by at most ``halt_max_move`` (5 m). It
+gains recall, but on curved approaches the stretch the lanes gain runs beside its queue, and
+the connectors that start there lose more than recall gains on two of three seed ranges (the
+docs section above).
 
 The halted vehicles also show where the entering lanes run next to the box
 (:func:`entering_halts`, ``halt_follow``, on): a queue that stood through a red phase is
@@ -156,10 +157,11 @@ def entering_halts(f, halts, lo: float, hi: float) -> np.ndarray:
     return xy[m & (s >= lo) & (s <= hi)]
 
 
-def halt_stops(frames, stops: np.ndarray, halts, pair_m: float, stop_min: float) -> np.ndarray:
-    """Stop distances moved in to where the vehicles halt (module doc). ``frames``: the arm
-    frames (origin, ``u`` outwards, ``n``, lane offsets ``lat``); ``halts``: the triple of
-    :func:`halt_positions`. Returns a new array."""
+def halt_stops(frames, stops: np.ndarray, halts, pair_m: float, stop_min: float,
+               max_move: float = math.inf) -> np.ndarray:
+    """Stop distances moved in to where the vehicles halt (module doc), by at most
+    ``max_move`` each. ``frames``: the arm frames (origin, ``u`` outwards, ``n``, lane offsets
+    ``lat``); ``halts``: the triple of :func:`halt_positions`. Returns a new array."""
     out = np.asarray(stops, float).copy()
     xy, _, ids = halts
     if not len(xy):
@@ -168,7 +170,7 @@ def halt_stops(frames, stops: np.ndarray, halts, pair_m: float, stop_min: float)
         mine = np.flatnonzero(_on_entering_side(f, halts))
         s = (xy[mine] - f.origin) @ f.u
         for i in _confirmed(s, ids[mine], pair_m):
-            out[a] = max(min(out[a], s[i] - HALF_CAR_M), stop_min)
+            out[a] = max(min(out[a], s[i] - HALF_CAR_M), stop_min, out[a] - max_move)
             break
     return out
 
