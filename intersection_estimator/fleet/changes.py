@@ -91,7 +91,10 @@ _RANGES = {'gate_m': ('(0, inf)', 'estimate <-> mapped intersection gate [m]'),
            'match_gate_m': ('(0, inf)', 'a vehicle is on a mapped lane within this lateral distance [m]'),
            'match_min_points': ('[1, inf)', 'positions (1 s averages) that make a vehicle a lane\'s traffic'),
            'turn_follow': ('[0, 1]', 'a vehicle that followed a mapped turn past this share of it took '
-                           'it, whatever lane beside it left on (0: off)')}
+                           'it, whatever lane beside it left on (0: off)'),
+           'empty_calibration': ('[0, 1]', "1: a missing lane's evidence is scaled by how often the "
+                                 "drive's other mapped lanes stood empty against the lane-choice model"),
+           'empty_prior': ('(0, inf)', 'pseudo lanes that stood empty as the model expects, in that check')}
 
 
 @dataclass(frozen=True)
@@ -125,6 +128,10 @@ class ChangeConfig:
     match_min_points: int = 5
     # a lane change right after the box is no turn the map lacks (corroborate.FOLLOW_SHARE)
     turn_follow: float = FOLLOW_SHARE
+    # the lane-choice model's probability that a lane stands empty, checked against the drive's
+    # other mapped lanes (lane_choice, empty_ratio; docs/fleet.md)
+    empty_calibration: int = 1
+    empty_prior: float = 1.0
 
     def validate(self) -> None:
         check_table(self, _RANGES, 'ChangeConfig')
@@ -434,7 +441,7 @@ def _lane_findings(e, m, est, mapped, lanes, conf, pas, cfg, counts_ok, lanes_se
             if p_dirs is not None:
                 p_dir = p_dirs.get((e, d), 0.0)
             index = {l.id: j for j, l in enumerate(ml)}
-            conc = None if choices is None else lane_choice(choices, (m, d))
+            conc = None if choices is None else lane_choice(choices, (m, d), cfg.empty_prior)
             for g in gone:
                 out.append(_lane_absence(g, index[g], m, d, p_dir, len(ml), mapped,
                                          moves.get((e, d), {}), cfg, conc, map_arm=m, direction=ds, evidence=ev))
@@ -529,11 +536,14 @@ def _choice_groups(traffic, mapped) -> tuple[dict, dict]:
     not give that turn (a late lane change, a matching slip)."""
     groups: dict = {}
     off: dict = {}
+    empties: dict = {}
     for a in mapped.arms:
         for d in (ENTERING, LEAVING):
             ml = a.lanes(d)
             served = _served(mapped, a.index, d)
-            for b, lanes in _turn_lanes(served).items():
+            turn_lanes = _turn_lanes(served)
+            empties[(a.index, d)] = _empty_lanes(traffic, ml, served, turn_lanes)
+            for b, lanes in turn_lanes.items():
                 c = [traffic.lane_turns.get((ml[j].id, b), 0) for j in lanes if j < len(ml)]
                 if len(c) >= 2 and sum(c) >= 2:
                     groups.setdefault((a.index, d), []).append(np.asarray(c, float))
@@ -542,7 +552,22 @@ def _choice_groups(traffic, mapped) -> tuple[dict, dict]:
                 if sum(n):
                     tot = off.setdefault((a.index, d), [0, 0])
                     tot[0], tot[1] = tot[0] + bad, tot[1] + sum(n)
-    return groups, off
+    return groups, off, empties
+
+
+def _empty_lanes(traffic, ml, served: dict, turn_lanes: dict) -> list:
+    """``[(empty, [(K_b, n_b), ...]), ...]`` per mapped lane of one direction whose turns the
+    drive's vehicles took: whether none of them drove the lane, and per turn it serves the
+    vehicles seen taking that turn from the direction's lanes and the mapped lanes serving it."""
+    out = []
+    for j, mine in sorted(served.items()):
+        if j >= len(ml):
+            continue
+        kb = [(sum(traffic.lane_turns.get((ml[i].id, b), 0) for i in turn_lanes[b] if i < len(ml)),
+               len(turn_lanes[b])) for b in sorted(mine)]
+        if sum(k for k, _ in kb) >= 1:
+            out.append((all(traffic.lane_turns.get((ml[j].id, b), 0) == 0 for b in mine), kb))
+    return out
 
 
 def _turn_lanes(served: dict) -> dict:
@@ -570,10 +595,12 @@ class LaneChoice:
     """How the drive's vehicles chose their lanes (:func:`lane_choice`): ``post`` the posterior
     ``[(k, weight), ...]`` of the concentration of a lane's share of a turn (``k = 0``: exact
     equal shares); ``off`` the probability that a vehicle is seen on a lane the map does not
-    give its turn."""
+    give its turn; ``empty_ratio`` how often a lane stands empty against that model's
+    expectation (:func:`empty_ratio`)."""
 
     post: tuple
     off: float = 0.0
+    empty_ratio: float = 1.0
 
 
 def lane_concentration(groups: dict, skip) -> list:
@@ -594,14 +621,37 @@ def lane_concentration(groups: dict, skip) -> list:
     return [(float(k), float(p)) for k, p in zip(np.r_[CONCENTRATIONS, 0.0], w) if p > 1e-6]
 
 
-def lane_choice(choices: tuple[dict, dict], skip) -> LaneChoice:
+def lane_choice(choices: tuple[dict, dict, dict], skip, empty_prior: float = 1.0) -> LaneChoice:
     """:class:`LaneChoice` of the drive from :func:`_choice_groups`, every arm direction but
-    ``skip``: the concentration's posterior (:func:`lane_concentration`) and the off-map share,
-    the posterior mean under a Jeffreys prior, ``(off + 0.5) / (seen + 1)``."""
-    groups, off = choices
+    ``skip``: the concentration's posterior (:func:`lane_concentration`), the off-map share,
+    the posterior mean under a Jeffreys prior, ``(off + 0.5) / (seen + 1)``, and the empty-lane
+    ratio (:func:`empty_ratio`, ``empty_prior`` pseudo lanes)."""
+    groups, off, empties = choices
     bad = sum(v[0] for key, v in off.items() if key != skip)
     seen = sum(v[1] for key, v in off.items() if key != skip)
-    return LaneChoice(tuple(lane_concentration(groups, skip)), (bad + 0.5) / (seen + 1.0))
+    post = tuple(lane_concentration(groups, skip))
+    eps = (bad + 0.5) / (seen + 1.0)
+    return LaneChoice(post, eps, empty_ratio(empties, skip, post, eps, empty_prior))
+
+
+def empty_ratio(empties: dict, skip, post, off: float, prior: float = 1.0) -> float:
+    """How often the drive's mapped lanes (every arm direction but ``skip``) stood empty
+    against how often the lane-choice model expects it, ``(E + a) / (P + a)``: ``E`` the
+    lanes none of whose turns' vehicles drove them, ``P`` the sum of the model's probabilities
+    of that (:func:`_absence_llr` per turn the lane serves, averaged over the concentration
+    ``post``), ``a = prior`` pseudo lanes that stood empty as often as the model says (the
+    posterior mean of the ratio under a ``Gamma(a, a)`` prior of mean 1). A world whose routes
+    cover every lane shows fewer empty lanes than random lane choice makes, and an empty lane
+    there is stronger evidence; a world that leaves lanes empty beyond the model weakens it."""
+    E = P = 0.0
+    for key, lanes in empties.items():
+        if key == skip:
+            continue
+        for empty, kb in lanes:
+            E += float(empty)
+            P += math.exp(-_mixed(post, lambda k, kb=kb: sum(_absence_llr(K, 1.0 / n, None, k, off)
+                                                            for K, n in kb)))
+    return (E + prior) / (P + prior)
 
 
 def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=None, **kw) -> Finding:
@@ -649,6 +699,9 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=Non
     h = sum((k[b] + MOVE_PRIOR) / n_b[b] for b in mine) / A
     llr = _mixed(post, lambda c: sum(_absence_llr(k[b], 1.0 / n_b[b], cfg, c, eps) for b in mine)
                  + _unknown_turn_llr(unknown, A, B, (1.0 - eps) * h, c))
+    if cfg.empty_calibration and conc is not None and llr > 0.0:
+        llr -= math.log(conc.empty_ratio)
+        kw['evidence']['empty_ratio'] = conc.empty_ratio
     share = h * A / (A + B)
     passages = sum(k[b] for b in mine) + unknown * share
     kw['evidence'] = {**kw.get('evidence', {}), 'turns_served': sorted(mine), 'passages_turns': known,

@@ -417,3 +417,51 @@ def test_arm_removed_edit_takes_the_lanes_only_its_turns_needed():
     kept, what = _arm_removed(copy.deepcopy(lls), rng, SimpleNamespace(arms=[0, 1, 2]), None)
     assert what == {'arm': 0, 'lanes': [(1, 'entering')]}
     assert sorted(l.id for l in kept) == ['c1b_2', 'c2_1', 'in1b', 'in2', 'out1', 'out2']
+
+
+def _two_lane_drive(counts):
+    """Five arm directions of two entering lanes each, both lanes serving the turn to arm 5;
+    ``counts[k] = (vehicles on lane A, on lane B)`` of direction ``k`` (1-4) taking it. The
+    judged direction 0 has lanes L0 (3 vehicles) and L1."""
+    from types import SimpleNamespace
+    from intersection_estimator.model import ENTERING
+    keys = [(k, j, 5, 0) for k in range(5) for j in (0, 1)]
+    X = _turns_map(keys)
+    lane = lambda i: SimpleNamespace(id=i)
+    names = {0: ('L0', 'L1'), **{k: (f'A{k}', f'B{k}') for k in range(1, 5)}}
+    X.arms = [SimpleNamespace(index=k, lanes=lambda d, k=k: [lane(n) for n in names[k]] if d == ENTERING else [])
+              for k in range(5)]
+    turns = {('L0', 5): 3}
+    for k, (a, b) in counts.items():
+        turns.update({(f'A{k}', 5): a, (f'B{k}', 5): b})
+    return X, SimpleNamespace(lane_turns={k: v for k, v in turns.items() if v})
+
+
+def test_an_empty_lane_weighs_what_the_drives_other_lanes_show():
+    """``empty_calibration``: one vehicle passed a direction of two lanes for its turn and
+    missed L1 (ln 2 nats under even shares). Where each of the drive's other two-lane
+    directions had its two vehicles on both lanes (random choice would leave one of the two
+    lanes empty half the time), a lane that exists is rarely left empty, and the empty L1 is
+    stronger evidence by ``-ln empty_ratio``; where the other directions left a lane empty
+    about as often as the model says, it is not. The judged direction's own lanes do not
+    vouch for themselves; the switch off leaves the evidence as it was."""
+    from math import log
+    from intersection_estimator.fleet.changes import _choice_groups, _lane_absence, lane_choice
+    from intersection_estimator.model import ENTERING
+    on, off = ChangeConfig(), ChangeConfig(empty_calibration=0)
+
+    def judged(counts):
+        X, traffic = _two_lane_drive(counts)
+        choice = lane_choice(_choice_groups(traffic, X), (0, ENTERING), on.empty_prior)
+        return choice, [_lane_absence('L1', 1, 0, ENTERING, 1.0, 2, X, {5: 1.0}, c, choice) for c in (on, off)]
+
+    choice, (f_on, f_off) = judged({k: (1, 1) for k in range(1, 5)})
+    assert choice.empty_ratio < 0.5
+    assert f_on.log_lr == pytest.approx(f_off.log_lr - log(choice.empty_ratio))
+    assert f_on.confidence > 0.5 > f_off.confidence and f_on.evidence['empty_ratio'] == choice.empty_ratio
+    lumpy, (g_on, g_off) = judged({1: (2, 0), 2: (0, 2), 3: (1, 1), 4: (2, 0)})
+    assert lumpy.empty_ratio > 0.8 and g_on.confidence < 0.5
+    # direction 0's own lanes are left out: more vehicles on L0 change nothing
+    X, traffic = _two_lane_drive({k: (1, 1) for k in range(1, 5)})
+    traffic.lane_turns[('L0', 5)] = 30
+    assert lane_choice(_choice_groups(traffic, X), (0, ENTERING)).empty_ratio == choice.empty_ratio
