@@ -52,7 +52,8 @@ def _cmd(args) -> int:
     try:
         cfg = ChangeConfig(moved_m=args.moved_m, min_confidence=args.min_confidence,
                            corroborate=int(not args.no_corroborate), turn_absence=int(not args.any_lane_absence),
-                           share_from_traffic=int(not args.even_lane_choice))
+                           share_from_traffic=int(not args.even_lane_choice),
+                           empty_calibration=int(not args.no_empty_calibration))
         doc = run_fleet(args.bags, args.map, args.out, engine=args.engine, workers=args.workers,
                         address=args.address, params_file=args.params, origin=tuple(args.origin),
                         projector=args.projector, cfg=cfg, progress=not args.quiet)
@@ -87,6 +88,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--even-lane-choice', action='store_true',
                    help="a missing lane: the lanes of a turn carry exactly equal shares of it (not read from "
                         "the drive's lane choices on the other arms)")
+    p.add_argument('--no-empty-calibration', action='store_true',
+                   help="a missing lane: its evidence is not weighed by how often the drive's other mapped "
+                        'lanes stood empty against the lane-choice model')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=_cmd)
     return p

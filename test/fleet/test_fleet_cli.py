@@ -80,16 +80,18 @@ def test_a_drive_through_two_intersections_gives_two_estimates(tmp_path):
 
 
 def test_corroboration_switches_are_recorded(fleet_data, tmp_path, capsys):
-    """--no-corroborate / --any-lane-absence / --even-lane-choice reach the change rules
+    """--no-corroborate / --any-lane-absence / --even-lane-choice / --no-empty-calibration reach
+    the change rules
     (changes.json's config);
     the moved lane is found either way (its vehicles drive 1 m beside the mapped line)."""
     out = tmp_path / 'off'
     main(['fleet', str(fleet_data['bags'] / 'drive1'), '--map', str(fleet_data['map']), '--out', str(out),
-          '--params', PARAMS, '--quiet', '--no-corroborate', '--any-lane-absence', '--even-lane-choice'])
+          '--params', PARAMS, '--quiet', '--no-corroborate', '--any-lane-absence', '--even-lane-choice',
+          '--no-empty-calibration'])
     doc = json.loads((out / 'changes.json').read_text())
     assert doc['config']['corroborate'] == 0 and doc['config']['turn_absence'] == 0
-    assert doc['config']['share_from_traffic'] == 0
+    assert doc['config']['share_from_traffic'] == 0 and doc['config']['empty_calibration'] == 0
     assert [c['kind'] for c in doc['intersections'][0]['changes']] == ['lane_moved']
     from intersection_estimator.fleet.changes import ChangeConfig
     assert ChangeConfig().corroborate == 1 and ChangeConfig().turn_absence == 1      # the defaults
-    assert ChangeConfig().share_from_traffic == 1
+    assert ChangeConfig().share_from_traffic == 1 and ChangeConfig().empty_calibration == 1
