@@ -33,13 +33,16 @@ def _publishers(node, reader, latched_qos, default_qos):
 
 def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name: str = 'bag_player',
          clock_hz: float = 40.0) -> int:
-    """Publish ``bags`` at ``rate`` x bag speed, and ``/clock``; waits up to ``wait_s`` for a subscriber."""
+    """Publish ``bags`` at ``rate`` x bag speed, and ``/clock``; waits up to ``wait_s`` for
+    subscribers (:func:`settled`)."""
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     if rate <= 0:
         raise ValueError(f'rate={rate} out of range: must be > 0')
     if clock_hz <= 0:
         raise ValueError(f'clock_hz={clock_hz} out of range: must be > 0')
+    if not wait_s >= 0:
+        raise ValueError(f'wait={wait_s} out of range: must be >= 0 [s]')
     rclpy.init()
     node = rclpy.create_node(node_name)
     try:
@@ -51,10 +54,13 @@ def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name:
                 raise BagError('no_usable_topic', 'no topic with an installed message type')
             pubs.pop('/clock', None)   # a recorded /clock is replaced by ours
             clock = _Clock(node, rate, clock_hz)
-            end = time.monotonic() + wait_s
-            while time.monotonic() < end and not any(p.get_subscription_count()
-                                                     for p in (clock.pub, *pubs.values())):
-                rclpy.spin_once(node, timeout_sec=0.05)
+            topics = ['/clock', *pubs]
+            matched = settled([clock.pub, *pubs.values()], wait_s,
+                              lambda: rclpy.spin_once(node, timeout_sec=0.05))
+            if not matched:
+                print(f'live: no subscriber after {wait_s:g} s; publishing anyway', file=sys.stderr)
+            else:
+                print(f"live: subscribed: {', '.join(topics[i] for i in sorted(matched))}", file=sys.stderr)
             n = 0
             for t_ns, topic, _, data in reader.raw_messages(topics=sorted(pubs)):
                 clock.until(t_ns)
@@ -68,6 +74,27 @@ def play(bags: list[str], *, rate: float = 1.0, wait_s: float = 10.0, node_name:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+#: the matched publishers must stay the same this long before the bag starts [s]
+SETTLE_S = 1.0
+
+
+def settled(pubs, wait_s: float, spin, settle_s: float = SETTLE_S, clock=time.monotonic) -> set:
+    """Indices of ``pubs`` with a matched subscriber, once that set is non-empty and has not
+    changed for ``settle_s``, or whatever it is after ``wait_s``. Discovery matches one topic at
+    a time: a node's ``/clock`` subscription often matches before its data topics, and a bag
+    started then loses its first messages to them. ``spin`` runs the graph one step."""
+    end = clock() + wait_s
+    matched, since = set(), clock()
+    while clock() < end:
+        now = {i for i, p in enumerate(pubs) if p.get_subscription_count()}
+        if now != matched:
+            matched, since = now, clock()
+        elif matched and clock() - since >= settle_s:
+            break
+        spin()
+    return matched
 
 
 class _Clock:

@@ -376,6 +376,8 @@ def register(sub) -> None:
                    help='samples: deterministic sample budget per tick (default); wall: the node\'s time budget')
     p.add_argument('--live', action='store_true', help='publish the bag over DDS at bag rate (and /clock) instead')
     p.add_argument('--rate', type=float, default=1.0, help='--live playback rate (default 1.0)')
+    p.add_argument('--wait', type=float, default=10.0,
+                   help='--live: seconds to wait for subscribers before playing (default 10)')
     p.add_argument('--json', action='store_true', help='print the summary as JSON')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     p.set_defaults(func=_main)
@@ -409,7 +411,7 @@ def _main(args) -> int:
     try:
         if args.live:
             from .live import play
-            return play(args.bags, rate=args.rate)
+            return play(args.bags, rate=args.rate, wait_s=args.wait)
         summary = replay(args.bags, args.out, params_file=args.params, seed=args.seed,
                          budget_mode=args.budget_mode, progress=not args.quiet, log=_stderr,
                          origin=args.origin)
