@@ -527,13 +527,14 @@ _QUAD = (np.arange(32) + 0.5) / 32
 CONCENTRATIONS = np.geomspace(0.05, 500.0, 41)
 
 
-def _choice_groups(traffic, mapped) -> tuple[dict, dict]:
+def _choice_groups(traffic, mapped) -> tuple[dict, dict, dict]:
     """What the drive's vehicles showed of their lane choice, per ``(mapped arm, direction)``:
     the lane counts of every mapped turn that two or more mapped lanes of the direction serve
     (the vehicles seen driving each of those lanes taking it, ``traffic.lane_turns``; turns
     with fewer than two such vehicles show no choice), and ``[off, seen]``: of the vehicles
     seen on a lane of the direction taking a mapped turn, how many were on a lane the map does
-    not give that turn (a late lane change, a matching slip)."""
+    not give that turn (a late lane change, a matching slip); and per direction its lanes'
+    emptiness against their turns' vehicles (:func:`_empty_lanes`, for :func:`empty_ratio`)."""
     groups: dict = {}
     off: dict = {}
     empties: dict = {}
