@@ -23,8 +23,9 @@ Per case (:func:`evaluate`):
   matched, and per matched arm ``used <= estimated <= true`` lanes in and out (a curb
   lane no vehicle drove may be missing, an extra lane may not). The strict
   ``topology_correct`` stays beside it;
-* observability: ``road_case`` -- the traffic used at most two arms of the truth (the data
-  show a road, not an intersection); ``intersection_reported`` -- the estimate has three
+* observability: ``road_case`` -- lane users were on at most two arms of the truth (the data
+  show a road, not an intersection; vehicles that stood on a lane through the recording count,
+  the ``present`` of a gt lane, default its ``traffic``); ``intersection_reported`` -- the estimate has three
   or more arms. Over road cases, :func:`aggregate` gives ``road_no_intersection_rate``;
 * traffic-following floor: where the ground truth carries a ``traffic_line`` per lane
   (the line that follows the traffic on that lane, see
@@ -157,10 +158,12 @@ def _parse(d, name):
         line = _points(_get(x, 'center_line', what), f'{what}.center_line', 2)
         tl = x.get('traffic_line')
         tl = None if tl is None or len(tl) < 2 else _points(tl, f'{what}.traffic_line', 2)
+        traffic = int(_num(x.get('traffic', 1), f'{what}.traffic'))
         lanes.append({'id': lid, 'kind': kind, 'arm': arm, 'arm_to': arm_to,
                       'center': line, 'pts': resample(line),
                       'successors': [str(s) for s in succ],
-                      'traffic': int(_num(x.get('traffic', 1), f'{what}.traffic')),
+                      'traffic': traffic,
+                      'present': max(int(_num(x.get('present', traffic), f'{what}.present')), traffic),
                       'traffic_line': tl})
     return center, arms, lanes
 
@@ -343,13 +346,14 @@ def evaluate(estimate, gt, *, gate: float = GATE_M, score_lanes: bool = True) ->
     by_kind = _by_kind(el, gl, match, floor)
     used_in, used_out = _used_lanes(gl, len(ga))
     if not score_lanes:
-        return {**_without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, topo)}
+        return {**_without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, topo,
+                                 _road_case(gl, len(ga)))}
     return {'ok': True, 'reason': None, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
             'arm_correct': arm_correct, 'topology_correct': topo,
             'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
             'arms_observed_correct': _arms_observed(ea, ga, c, used_in, used_out),
             'arms_true_used': int(np.count_nonzero(used_in + used_out)),
-            'road_case': bool(np.count_nonzero(used_in + used_out) <= 2),
+            'road_case': _road_case(gl, len(ga)),
             'intersection_reported': len(ea) >= 3,
             'used_lanes_per_arm': [[int(a), int(b)] for a, b in zip(used_in, used_out)],
             **_floor_summary(floor, match),
@@ -366,7 +370,7 @@ def evaluate(estimate, gt, *, gate: float = GATE_M, score_lanes: bool = True) ->
             'connectivity_recall': ok_con / n_con if n_con else None, 'by_kind': by_kind}
 
 
-def _without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, topo) -> dict:
+def _without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, topo, road) -> dict:
     """The topology-level metrics of :func:`evaluate` with every lane-course field empty."""
     m = _failed(None)
     m.update({'ok': True, 'n_arms_true': len(ga), 'n_arms_est': len(ea),
@@ -374,7 +378,7 @@ def _without_lanes(ea, ga, r, c, used_in, used_out, ec, gc, dang, arm_correct, t
               'topology_observed_correct': _topology_observed(ea, ga, r, c, used_in, used_out),
               'arms_observed_correct': _arms_observed(ea, ga, c, used_in, used_out),
               'arms_true_used': int(np.count_nonzero(used_in + used_out)),
-              'road_case': bool(np.count_nonzero(used_in + used_out) <= 2),
+              'road_case': road,
               'intersection_reported': len(ea) >= 3,
               'used_lanes_per_arm': [[int(a), int(b)] for a, b in zip(used_in, used_out)],
               'center_error_m': float(np.linalg.norm(ec - gc)),
@@ -406,6 +410,16 @@ def _used_lanes(gt_lanes, n_arms):
         if g['traffic'] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms:
             (used_in if g['kind'] == 'entering' else used_out)[g['arm']] += 1
     return used_in, used_out
+
+
+def _road_case(gt_lanes, n_arms) -> bool:
+    """The data show a road, not an intersection: lane users were on at most two true arms,
+    counting vehicles that stood on a lane through the recording (``present``; a queue at a
+    red light shows its approach -- the estimator reads such queues, ``topology/standing.py``
+    -- while ``traffic`` counts only vehicles that drove)."""
+    seen = {g['arm'] for g in gt_lanes
+            if g['present'] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms}
+    return len(seen) <= 2
 
 
 def _arms_observed(est_arms, gt_arms, c, used_in, used_out) -> bool:

@@ -121,6 +121,14 @@ def test_road_case_and_intersection_reported(gt):
     s = aggregate([full, m, evaluate(gt, gt)])
     assert s['road_cases'] == 2 and s['road_no_intersection_rate'] == 0.5
     assert not evaluate(gt, gt)['road_case']
+    # a queue that stood on a third arm's lane through the recording (``present``, not
+    # ``traffic``): the data show that arm, no road; topology_observed still does not ask
+    # for the lane (no vehicle drove it)
+    queued = copy.deepcopy(truth)
+    lane = next(x for x in queued['lanes'] if x['kind'] == 'entering' and x['arm'] not in keep)
+    lane['present'] = 3
+    q = evaluate(gt, queued)
+    assert not q['road_case'] and q['arms_true_used'] == full['arms_true_used']
 
 
 def test_topology_only_scoring_still_asks_for_the_used_lanes(gt):

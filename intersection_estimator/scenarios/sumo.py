@@ -128,7 +128,9 @@ def _ego_choice(g, net, gt, arms=None):
 def _traffic(sc: FamilyScenario, fcd, gt, id_of: dict):
     """Traffic per lanelet and traffic-following lines from the tracked detections of
     cars and trucks that drove in the window (``floor.drove``), each labelled with the
-    SUMO lane its vehicle was on (module doc)."""
+    SUMO lane its vehicle was on (module doc); ``present`` per lanelet (gt.json) counts the
+    ones that stood on it through the window too (a queue shows its approach: the road
+    cases of ``evaluate``)."""
     users = [f for f in fcd if f.kind in LANE_USERS]
     dets, cyc = sc._stream('tracked')
     labels = np.full(len(dets), '', dtype=object)
@@ -143,10 +145,12 @@ def _traffic(sc: FamilyScenario, fcd, gt, id_of: dict):
         j = np.clip(np.searchsorted(code[order], q), 0, len(code) - 1)
         hit = code[order][j] == q
         labels[hit] = lab[order][j[hit]]
+    present = traffic_counts(gt.lanelets, labels.astype(str), dets.track_id)
     labels = drove(labels.astype(str), dets.track_id, dets.xy, dets.t)
     sc.traffic = traffic_counts(gt.lanelets, labels, dets.track_id)
-    sc.extra_gt = {lid: {'traffic_line': line}
-                   for lid, line in traffic_lines(gt.lanelets, dets.xy, labels).items()}
+    sc.extra_gt = {lid: {'present': n} for lid, n in present.items()}
+    for lid, line in traffic_lines(gt.lanelets, dets.xy, labels).items():
+        sc.extra_gt.setdefault(lid, {})['traffic_line'] = line
 
 
 def sumo_scenario(seed: int, cfg: SumoConfig = SumoConfig(), sim: SimConfig = SimConfig(),
