@@ -700,7 +700,9 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=Non
     h = sum((k[b] + MOVE_PRIOR) / n_b[b] for b in mine) / A
     llr = _mixed(post, lambda c: sum(_absence_llr(k[b], 1.0 / n_b[b], cfg, c, eps) for b in mine)
                  + _unknown_turn_llr(unknown, A, B, (1.0 - eps) * h, c))
-    if cfg.empty_calibration and conc is not None and llr > 0.0:
+    if cfg.empty_calibration and conc is not None and llr > 0.0 and sum(k[b] for b in mine) >= 1:
+        # the ratio is read on lanes whose turns some vehicle was seen taking (_empty_lanes):
+        # it speaks for a lane with such vehicles, not for one shown by unseen turns alone
         llr -= math.log(conc.empty_ratio)
         kw['evidence']['empty_ratio'] = conc.empty_ratio
     share = h * A / (A + B)

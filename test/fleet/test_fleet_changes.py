@@ -459,6 +459,11 @@ def test_an_empty_lane_weighs_what_the_drives_other_lanes_show():
     assert choice.empty_ratio < 0.5
     assert f_on.log_lr == pytest.approx(f_off.log_lr - log(choice.empty_ratio))
     assert f_on.confidence > 0.5 > f_off.confidence and f_on.evidence['empty_ratio'] == choice.empty_ratio
+    # shown by vehicles whose turn was not seen only: the ratio, read on lanes with seen
+    # turns, does not speak for it
+    X, traffic = _two_lane_drive({k: (1, 1) for k in range(1, 5)})
+    unseen = [_lane_absence('L1', 1, 0, ENTERING, 3.0, 2, X, {}, c, choice) for c in (on, off)]
+    assert unseen[0].log_lr == unseen[1].log_lr > 0 and 'empty_ratio' not in unseen[0].evidence
     lumpy, (g_on, g_off) = judged({1: (2, 0), 2: (0, 2), 3: (1, 1), 4: (2, 0)})
     assert lumpy.empty_ratio > 0.8 and g_on.confidence < 0.5
     # direction 0's own lanes are left out: more vehicles on L0 change nothing
