@@ -66,6 +66,11 @@ def test_some_traffic_and_a_floor(case):
     assert 1.0 < m['floor_cm'] < 60.0          # tracked noise 1 m, smoothed along the lane
     labels = {int(x) for x in sc.detections('tracked').label}
     assert 1 in labels
+    # ``present`` (road cases): every vehicle seen on a lane, those that stood through the
+    # recording too -- never fewer than ``traffic``, the vehicles that drove it
+    present = {x['id']: x['present'] for x in doc['lanes']}
+    assert all(present[x['id']] >= x['traffic'] for x in doc['lanes'])
+    assert sum(present.values()) >= sum(x['traffic'] for x in doc['lanes']) > 0
 
 
 def test_neighbouring_junction_is_not_part_of_the_truth(tmp_path):
