@@ -23,10 +23,11 @@ Per case (:func:`evaluate`):
   matched, and per matched arm ``used <= estimated <= true`` lanes in and out (a curb
   lane no vehicle drove may be missing, an extra lane may not). The strict
   ``topology_correct`` stays beside it;
-* observability: ``road_case`` -- lane users were on at most two arms of the truth (the data
-  show a road, not an intersection; vehicles that stood on a lane through the recording count,
-  the ``present`` of a gt lane, default its ``traffic``); ``intersection_reported`` -- the estimate has three
-  or more arms. Over road cases, :func:`aggregate` gives ``road_no_intersection_rate``;
+* observability: ``road_case`` -- lane users were on at most two arms of the truth (the
+  data show a road, not an intersection; vehicles that stood on a lane through the
+  recording count: the ``present`` of a gt lane, default its ``traffic``);
+  ``intersection_reported`` -- the estimate has three or more arms. Over road cases,
+  :func:`aggregate` gives ``road_no_intersection_rate``;
 * traffic-following floor: where the ground truth carries a ``traffic_line`` per lane
   (the line that follows the traffic on that lane, see
   :mod:`intersection_estimator.scenarios.floor`), ``floor_cm`` is its mean orthogonal
@@ -414,9 +415,9 @@ def _used_lanes(gt_lanes, n_arms):
 
 def _road_case(gt_lanes, n_arms) -> bool:
     """The data show a road, not an intersection: lane users were on at most two true arms,
-    counting vehicles that stood on a lane through the recording (``present``; a queue at a
-    red light shows its approach -- the estimator reads such queues, ``topology/standing.py``
-    -- while ``traffic`` counts only vehicles that drove)."""
+    counting every vehicle seen on a lane, those that stood through the recording too
+    (``present``; a queue at a red light shows its approach -- the estimator reads such
+    queues, ``topology/standing.py`` -- while ``traffic`` counts only vehicles that drove)."""
     seen = {g['arm'] for g in gt_lanes
             if g['present'] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms}
     return len(seen) <= 2

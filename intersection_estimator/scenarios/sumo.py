@@ -128,9 +128,9 @@ def _ego_choice(g, net, gt, arms=None):
 def _traffic(sc: FamilyScenario, fcd, gt, id_of: dict):
     """Traffic per lanelet and traffic-following lines from the tracked detections of
     cars and trucks that drove in the window (``floor.drove``), each labelled with the
-    SUMO lane its vehicle was on (module doc); ``present`` per lanelet (gt.json) counts the
-    ones that stood on it through the window too (a queue shows its approach: the road
-    cases of ``evaluate``)."""
+    SUMO lane its vehicle was on (module doc); ``present`` per lanelet (gt.json) counts every
+    vehicle seen on it, those that stood through the window too (a queue shows its approach:
+    the road cases of ``evaluate``)."""
     users = [f for f in fcd if f.kind in LANE_USERS]
     dets, cyc = sc._stream('tracked')
     labels = np.full(len(dets), '', dtype=object)
