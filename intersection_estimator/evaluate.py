@@ -404,11 +404,12 @@ def _by_kind(est_lanes, gt_lanes, match, floor) -> dict:
     return out
 
 
-def _used_lanes(gt_lanes, n_arms):
-    """Per true arm: how many entering / leaving lanes carried traffic (issue 15)."""
+def _used_lanes(gt_lanes, n_arms, count: str = 'traffic'):
+    """Per true arm: how many entering / leaving lanes carried traffic (issue 15; ``count``
+    'present': had a lane user on them, standing ones included)."""
     used_in, used_out = np.zeros(n_arms, int), np.zeros(n_arms, int)
     for g in gt_lanes:
-        if g['traffic'] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms:
+        if g[count] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms:
             (used_in if g['kind'] == 'entering' else used_out)[g['arm']] += 1
     return used_in, used_out
 
@@ -418,9 +419,8 @@ def _road_case(gt_lanes, n_arms) -> bool:
     counting every vehicle seen on a lane, those that stood through the recording too
     (``present``; a queue at a red light shows its approach -- the estimator reads such
     queues, ``topology/standing.py`` -- while ``traffic`` counts only vehicles that drove)."""
-    seen = {g['arm'] for g in gt_lanes
-            if g['present'] > 0 and g['kind'] != 'connector' and 0 <= g['arm'] < n_arms}
-    return len(seen) <= 2
+    seen_in, seen_out = _used_lanes(gt_lanes, n_arms, 'present')
+    return bool(np.count_nonzero(seen_in + seen_out) <= 2)
 
 
 def _arms_observed(est_arms, gt_arms, c, used_in, used_out) -> bool:

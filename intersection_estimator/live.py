@@ -82,9 +82,9 @@ SETTLE_S = 1.0
 
 def settled(pubs, wait_s: float, spin, settle_s: float = SETTLE_S, clock=time.monotonic) -> set:
     """Indices of ``pubs`` with a matched subscriber, once that set is non-empty and has not
-    changed for ``settle_s``, or whatever it is after ``wait_s``. Discovery matches one topic at
-    a time: a node's ``/clock`` subscription often matches before its data topics, and a bag
-    started then loses its first messages to them. ``spin`` runs the graph one step."""
+    changed for ``settle_s``, or whatever it is after ``wait_s``. Discovery matches topic by
+    topic: a bag started at the first match loses the first messages of a topic matched later
+    (docs/replay.md, ``--live``). ``spin`` runs the graph one step."""
     end = clock() + wait_s
     matched, since = set(), clock()
     while clock() < end:

@@ -542,10 +542,10 @@ def _choice_groups(traffic, mapped) -> tuple[dict, dict, dict]:
         for d in (ENTERING, LEAVING):
             ml = a.lanes(d)
             served = _served(mapped, a.index, d)
-            turn_lanes = _turn_lanes(served)
-            empties[(a.index, d)] = _empty_lanes(traffic, ml, served, turn_lanes)
-            for b, lanes in turn_lanes.items():
+            turns: dict = {}            # turn -> (vehicles taking it from its lanes, its lanes)
+            for b, lanes in _turn_lanes(served).items():
                 c = [traffic.lane_turns.get((ml[j].id, b), 0) for j in lanes if j < len(ml)]
+                turns[b] = (sum(c), len(lanes))
                 if len(c) >= 2 and sum(c) >= 2:
                     groups.setdefault((a.index, d), []).append(np.asarray(c, float))
                 n = [traffic.lane_turns.get((l.id, b), 0) for l in ml]
@@ -553,19 +553,20 @@ def _choice_groups(traffic, mapped) -> tuple[dict, dict, dict]:
                 if sum(n):
                     tot = off.setdefault((a.index, d), [0, 0])
                     tot[0], tot[1] = tot[0] + bad, tot[1] + sum(n)
+            empties[(a.index, d)] = _empty_lanes(traffic, ml, served, turns)
     return groups, off, empties
 
 
-def _empty_lanes(traffic, ml, served: dict, turn_lanes: dict) -> list:
+def _empty_lanes(traffic, ml, served: dict, turns: dict) -> list:
     """``[(empty, [(K_b, n_b), ...]), ...]`` per mapped lane of one direction whose turns the
     drive's vehicles took: whether none of them drove the lane, and per turn it serves the
-    vehicles seen taking that turn from the direction's lanes and the mapped lanes serving it."""
+    vehicles seen taking that turn from the direction's lanes and the mapped lanes serving it
+    (``turns``: those pairs per turn)."""
     out = []
     for j, mine in sorted(served.items()):
         if j >= len(ml):
             continue
-        kb = [(sum(traffic.lane_turns.get((ml[i].id, b), 0) for i in turn_lanes[b] if i < len(ml)),
-               len(turn_lanes[b])) for b in sorted(mine)]
+        kb = [turns[b] for b in sorted(mine)]
         if sum(k for k, _ in kb) >= 1:
             out.append((all(traffic.lane_turns.get((ml[j].id, b), 0) == 0 for b in mine), kb))
     return out
@@ -698,17 +699,18 @@ def _lane_absence(lane_id, j, m, d, p_dir, n_lanes, mapped, moves, cfg, conc=Non
     A = sum(k[b] + MOVE_PRIOR for b in mine)
     B = sum(k[b] + MOVE_PRIOR for b in offered - mine)
     h = sum((k[b] + MOVE_PRIOR) / n_b[b] for b in mine) / A
+    seen = sum(k[b] for b in mine)                 # vehicles seen taking the lane's turns
     llr = _mixed(post, lambda c: sum(_absence_llr(k[b], 1.0 / n_b[b], cfg, c, eps) for b in mine)
                  + _unknown_turn_llr(unknown, A, B, (1.0 - eps) * h, c))
-    if cfg.empty_calibration and conc is not None and llr > 0.0 and sum(k[b] for b in mine) >= 1:
+    if cfg.empty_calibration and conc is not None and llr > 0.0 and seen >= 1:
         # the ratio is read on lanes whose turns some vehicle was seen taking (_empty_lanes):
         # it speaks for a lane with such vehicles, not for one shown by unseen turns alone
         llr -= math.log(conc.empty_ratio)
         kw['evidence']['empty_ratio'] = conc.empty_ratio
     share = h * A / (A + B)
-    passages = sum(k[b] for b in mine) + unknown * share
+    passages = seen + unknown * share
     kw['evidence'] = {**kw.get('evidence', {}), 'turns_served': sorted(mine), 'passages_turns': known,
-                      'vehicles_its_turns': sum(k[b] for b in mine), 'passages_unknown_turn': unknown}
+                      'vehicles_its_turns': seen, 'passages_unknown_turn': unknown}
     return _absence('lane_removed', f'lane_removed:{lane_id}', passages, share, cfg, llr=llr,
                     map_lanes=[lane_id], **kw)
 
