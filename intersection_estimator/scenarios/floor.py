@@ -133,15 +133,12 @@ def label_points(seg: np.ndarray, vehicle: np.ndarray, gt) -> np.ndarray:
     """Lanelet id per point ('' = none) from its segment id and vehicle (module doc);
     ``gt`` is a :class:`~.lanegraph.LaneGraphGT`."""
     by_id = {ll.id: ll for ll in gt.lanelets}
-    con_of = {s: lid for lid, segs in gt.segments_of.items() if by_id[lid].kind == 'connector'
-              for s in segs}
-    entering_of = {c: ll.id for ll in gt.lanelets for c in ll.successors
-                   if ll.kind == 'entering'}
     owners: dict = {}
     for lid, segs in gt.segments_of.items():
-        if by_id[lid].kind != 'connector':
-            for s in segs:
-                owners.setdefault(s, []).append(lid)
+        for s in segs:
+            owners.setdefault(s, []).append(lid)
+    entering_of = {c: ll.id for ll in gt.lanelets for c in ll.successors
+                   if ll.kind == 'entering'}
     seg = np.asarray(seg).astype(str)
     vehicle = np.asarray(vehicle).astype(str)
     out = np.full(len(seg), '', dtype=object)
@@ -150,19 +147,31 @@ def label_points(seg: np.ndarray, vehicle: np.ndarray, gt) -> np.ndarray:
     for v in range(len(v_codes)):
         idx = np.flatnonzero(v_of == v)
         segs_v = s_codes[s_of[idx]]
-        cons = [con_of[s] for s in segs_v if s in con_of]
-        mine = set()
-        if cons:
-            c = max(sorted(set(cons)), key=cons.count)
-            mine = {c, entering_of.get(c, ''), by_id[c].successors[0]}
+        c = _vehicle_connector(segs_v, owners, by_id, gt.segments_of)
+        mine = {c, entering_of.get(c, ''), by_id[c].successors[0]} if c else set()
         pick = {}
         for s in set(segs_v.tolist()):       # one decision per (vehicle, segment)
-            cand = [con_of[s]] if s in con_of else owners.get(s, [])
+            cand = owners.get(s, [])
             if mine:
                 cand = [x for x in cand if x in mine]
             pick[s] = cand[0] if len(cand) == 1 else ''
         out[idx] = [pick[s] for s in segs_v]
     return out.astype(str)
+
+
+def _vehicle_connector(segs_v: np.ndarray, owners: dict, by_id: dict, segments_of: dict) -> str:
+    """The connector a vehicle drove ('' if none or undecided): the one holding most of
+    the distinct connector segments it was seen on, then most of its points. Connectors of
+    a junction cluster share their first pieces (a turn and the straight ahead through the
+    same link between two nodes of an inD ring), so the piece where they part decides; a
+    vehicle seen on the shared pieces only is undecided."""
+    seen, n = np.unique(segs_v, return_counts=True)
+    pts = dict(zip(seen.tolist(), n.tolist()))
+    cons = {lid for s in pts for lid in owners.get(s, []) if by_id[lid].kind == 'connector'}
+    score = {c: (len(m := [s for s in segments_of[c] if s in pts]), sum(pts[s] for s in m))
+             for c in cons}
+    best = [c for c in cons if score[c] == max(score.values())]
+    return best[0] if len(best) == 1 else ''
 
 
 def match_segments(xy: np.ndarray, heading: np.ndarray, segs: dict, *, gate_m: float = 2.5,

@@ -93,6 +93,29 @@ def test_labels_follow_the_vehicles_connector():
     assert counts[pocket] == 1 and counts[f'a{south}_in0'] == 0
 
 
+def test_labels_where_connectors_share_their_first_pieces():
+    """An inD ring: the turn to arm 2 and the one to arm 0 run through the same two pieces
+    ('j5', 'link') and part at the next node ('j2a' / 'j2b'); the parting piece decides."""
+    from types import SimpleNamespace as L
+    lls = [L(id='a1_in0', kind='entering', successors=['c_to2', 'c_to0']),
+           L(id='c_to2', kind='connector', successors=['a2_out0']),
+           L(id='c_to0', kind='connector', successors=['a0_out0']),
+           L(id='a2_out0', kind='leaving', successors=[]),
+           L(id='a0_out0', kind='leaving', successors=[])]
+    gt = L(lanelets=lls, segments_of={'a1_in0': ['in'], 'c_to2': ['j5', 'link', 'j2a'],
+                                      'c_to0': ['j5', 'link', 'j2b'], 'a2_out0': ['out2'],
+                                      'a0_out0': ['out0']})
+    # 'v' turns to arm 2 (seen 4 times on the shared link, once where it parts); 'w' goes
+    # to arm 0; 'u' was seen on the shared pieces only
+    seg = np.array(['in', 'j5', 'link', 'link', 'link', 'link', 'j2a', 'out2', 'out2',
+                    'in', 'link', 'j2b', 'out0', 'j5', 'link'])
+    veh = np.array(['v'] * 9 + ['w'] * 4 + ['u'] * 2)
+    lab = label_points(seg, veh, gt)
+    assert list(lab[:9]) == ['a1_in0'] + ['c_to2'] * 6 + ['a2_out0'] * 2
+    assert list(lab[9:13]) == ['a1_in0', 'c_to0', 'c_to0', 'a0_out0']
+    assert list(lab[13:]) == ['', '']                       # undecided, not guessed
+
+
 def test_map_matching_needs_distance_and_heading():
     segs = _graph()
     xy = np.array([[40.0, 1.9], [40.0, 1.9], [40.0, 9.0]])
