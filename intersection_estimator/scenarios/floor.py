@@ -11,7 +11,8 @@ traffic costs on that case: lane courses well below it fit the map, not the data
 Labels: which lanelet each point belongs to comes from the lane-graph segment the
 vehicle was on (:func:`label_points`): SUMO reports it, the AV2 converter map-matches it
 (:func:`match_segments`). A vehicle's connector fixes which of the lanelets sharing an
-upstream segment (turn pockets) its approach belongs to.
+upstream segment (turn pockets) its approach belongs to; where connectors share their first
+pieces (an inD ring), the piece where they part fixes the connector.
 
 Traffic is what drove: a vehicle that stands still through the whole recording (a parked
 car, a car waiting at the kerb) shows neither a lane's course nor its direction, and the
@@ -168,8 +169,11 @@ def _vehicle_connector(segs_v: np.ndarray, owners: dict, by_id: dict, segments_o
     seen, n = np.unique(segs_v, return_counts=True)
     pts = dict(zip(seen.tolist(), n.tolist()))
     cons = {lid for s in pts for lid in owners.get(s, []) if by_id[lid].kind == 'connector'}
-    score = {c: (len(m := [s for s in segments_of[c] if s in pts]), sum(pts[s] for s in m))
-             for c in cons}
+
+    def covered(c):                  # (distinct pieces of c it was seen on, its points there)
+        mine = [s for s in segments_of[c] if s in pts]
+        return len(mine), sum(pts[s] for s in mine)
+    score = {c: covered(c) for c in cons}
     best = [c for c in cons if score[c] == max(score.values())]
     return best[0] if len(best) == 1 else ''
 
