@@ -187,6 +187,8 @@ RANGES = {
                          '(0: no cap; topology/side_by_side.py)'),
     'side_by_side_single': (None, 'an arm direction in which no two trajectory parts overlap '
                             'side by side keeps one lane (topology/side_by_side.py)'),
+    'side_by_side_width': (None, 'the lanes shown side by side are read with the arm\'s width '
+                           'capped at lane_width (topology/side_by_side.py)'),
     'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
                       'trajectory parts are and the state with it is at most this many nats '
                       'below the state without (0: off; topology/weak_arms.py) [nats]'),
@@ -330,6 +332,7 @@ class TopologyConfig:
     side_by_side_overlap: float = 8.0
     side_by_side_cap: int = 2
     side_by_side_single: bool = True
+    side_by_side_width: bool = True      # docs/real_junctions.md, "Stop 48"
     weak_arm_nats: float = 1.0
     weak_arm_support: float = 1.0
     weak_arm_box: float = 25.0

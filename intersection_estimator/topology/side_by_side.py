@@ -25,6 +25,12 @@ refits its gap, width and axis offset for the new counts
   cuts short). Offline on the SUMO dev directions it fixed 16 and broke 1; Table I never has
   such a direction with more than one lane.
 
+The lanes are read at the arm's width capped at ``lane_width`` (``side_by_side_width``): a
+MAP state that holds two lanes as one widens that lane to cover both lanes' vehicles (on the
+SUMO family up to the 4 m limit), and read at that width two lanes 2.75-2.8 m apart lie 0.7
+widths apart, no whole lane (SUMO ``topology_observed`` +0-2 points on four seed ranges,
+Table I, raw radar and AV2 unchanged; docs/real_junctions.md, "Stop 48").
+
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
 large box through and raised 10 of 400 Table I arms, the tracker's none. Measured on the
@@ -298,7 +304,8 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
         i0 = HDR + k * STRIDE
         profiles = arm_profiles(S, k, tr, arm_of_row, entering, inner, outer, cfg.traffic_side)
         now = [int(S[i0 + NIN]), int(S[i0 + NOUT])]
-        want = [counted(n, *side_by_side(T, S[i0 + WID], cfg.side_by_side_overlap), cfg)
+        w = min(S[i0 + WID], cfg.lane_width) if cfg.side_by_side_width else S[i0 + WID]   # module doc
+        want = [counted(n, *side_by_side(T, w, cfg.side_by_side_overlap), cfg)
                 for n, T in zip(now, profiles)]
         if want != now:
             (S, lpost), = refit_lane_candidates(post, S, k, [want])

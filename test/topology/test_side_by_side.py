@@ -14,7 +14,7 @@ from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, co
                                                           entering_rows, fit_counts,
                                                           lanes_side_by_side, nearest_arm,
                                                           side_by_side, tracks_of)
-from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, pack_state
+from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, WID, pack_state
 from intersection_estimator.topology.support import reported
 
 from .scenes import EASY, scene, tracked_posterior, trajectories
@@ -209,3 +209,21 @@ def test_rows_without_a_heading_take_it_from_their_path():
     T_in, _ = arm_profiles(S, 3, from_path, nearest_arm(S, from_path.xy),
                            entering_rows(S, from_path), 12.0, 75.0)
     assert lanes_side_by_side(T_in, gt.arms[3].lane_width, 8.0) == 2
+
+
+@pytest.mark.parametrize('capped,lanes', [(True, 2), (False, 1)])
+def test_lanes_are_read_at_a_width_the_map_state_did_not_widen(capped, lanes):
+    """An entering direction of two lanes 2.75 m apart that the MAP state holds as one lane
+    4 m wide (the width grew to cover the second lane's vehicles): at 4 m the two lanes lie
+    0.69 widths apart, not one lane; read at ``lane_width`` (3.5 m), 0.79 widths, one lane
+    apart, and the lane is raised."""
+    from .scenes import easy_intersection
+    gt = easy_intersection(lanes=((2, 1),) + ((1, 1),) * 3, width=2.75)
+    cfg = replace(CFG, side_by_side_width=capped)
+    post = tracked_posterior(cfg, gt)
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    wide = pack_state(gt)
+    k = next(i for i, a in enumerate(sorted(gt.arms, key=lambda a: a.angle)) if a.lanes_in == 2)
+    wide[HDR + k * STRIDE + NIN], wide[HDR + k * STRIDE + WID] = 1, 4.0
+    S2, _ = fit_counts(post, wide.copy(), tr, cfg)
+    assert S2[HDR + k * STRIDE + NIN] == lanes
