@@ -29,7 +29,7 @@ The lanes are read at the arm's width capped at ``lane_width`` (``side_by_side_w
 MAP state that holds two lanes as one widens that lane to cover both lanes' vehicles (on the
 SUMO family up to the 4 m limit), and read at that width two lanes 2.75-2.8 m apart lie 0.7
 widths apart, no whole lane (SUMO ``topology_observed`` +0-2 points on four seed ranges,
-Table I, raw radar and AV2 unchanged; docs/real_junctions.md, "Stop 48").
+tracked and radar; Table I tracked and AV2 unchanged; docs/real_junctions.md, "Stop 48").
 
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
