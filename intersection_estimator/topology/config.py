@@ -189,6 +189,9 @@ RANGES = {
                             'side by side keeps one lane (topology/side_by_side.py)'),
     'side_by_side_width': (None, 'the lanes shown side by side are read with the arm\'s width '
                            'capped at lane_width (topology/side_by_side.py)'),
+    'side_by_side_reach': ('[0, 1000]', 'entering lanes side by side are also read from '
+                           'trajectory rows up to this far beyond track_radius, as a window of '
+                           'their own (topology/side_by_side.py) [m]'),
     'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
                       'trajectory parts are and the state with it is at most this many nats '
                       'below the state without (0: off; topology/weak_arms.py) [nats]'),
@@ -333,6 +336,7 @@ class TopologyConfig:
     side_by_side_cap: int = 2
     side_by_side_single: bool = True
     side_by_side_width: bool = True      # docs/real_junctions.md, "Stop 48"
+    side_by_side_reach: float = 50.0     # docs/real_junctions.md, "Stop 49"
     weak_arm_nats: float = 1.0
     weak_arm_support: float = 1.0
     weak_arm_box: float = 25.0

@@ -31,6 +31,14 @@ SUMO family up to the 4 m limit), and read at that width two lanes 2.75-2.8 m ap
 widths apart, no whole lane (SUMO ``topology_observed`` +0-2 points on four seed ranges,
 tracked and radar; Table I tracked and AV2 unchanged; docs/real_junctions.md, "Stop 48").
 
+The entering profiles reach ``side_by_side_reach`` (50 m) beyond ``track_radius``, read
+as a window of their own: vehicles that leave a lane for their turn before the radius show
+it side by side farther out (on the SUMO family a lane whose only vehicles were seen 75-100
+m out). Leaving lanes are not read there: beyond the box a road may gain lanes that the arm
+does not have at the box (AV2 scenario 2 gains one 75-100 m out). Read with the stations
+within the radius, the far stretch diluted their separations and lowered the cap
+(docs/real_junctions.md, "Stop 49").
+
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
 large box through and raised 10 of 400 Table I arms, the tracker's none. Measured on the
@@ -150,15 +158,15 @@ def arm_frame(S, k, xy: np.ndarray, h: np.ndarray):
 
 
 def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: float,
-                 traffic_side: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                 traffic_side: int = 1, reach: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Lateral profiles of the trajectory parts on arm ``k`` of ``S``, entering and
-    leaving: rows ``t(s)`` on the stations ``inner, inner + STEP, ... < outer`` (NaN off
-    the part) from the part's rows (``entering``, :func:`entering_rows`) on the arm
-    (``arm_of_row``, :func:`nearest_arm`) heading along the axis within ``ALIGN_DEG`` the
-    part's way, beyond ``inner`` and within ``REACH`` lane widths beyond the arm's lanes
-    of that direction (the likelihood's lateral coordinate,
-    :func:`.likelihood._closest_lane`)."""
-    grid = np.arange(inner, outer, STEP)
+    leaving: rows ``t(s)`` on the stations ``inner, inner + STEP, ... < outer + reach``
+    (NaN off the part; leaving parts end at ``outer``, module doc) from the part's rows
+    (``entering``, :func:`entering_rows`) on the arm (``arm_of_row``, :func:`nearest_arm`)
+    heading along the axis within ``ALIGN_DEG`` the part's way, beyond ``inner`` and within
+    ``REACH`` lane widths beyond the arm's lanes of that direction (the likelihood's
+    lateral coordinate, :func:`.likelihood._closest_lane`)."""
+    grid = np.arange(inner, outer + reach, STEP)
     mine = np.flatnonzero(arm_of_row == k)
     tix, entering = tr.tix[mine], entering[mine]
     s, t, c = arm_frame(S, k, tr.xy[mine], tr.h[mine])
@@ -166,7 +174,8 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
     w, hg = S[i0 + WID], 0.5 * S[i0 + GAP]
     base = (s >= inner) & (np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))
     out = []
-    for sign, nl, part in ((1.0, S[i0 + NIN], entering), (-1.0, S[i0 + NOUT], ~entering)):
+    for sign, nl, part, end in ((1.0, S[i0 + NIN], entering, outer + reach),
+                                (-1.0, S[i0 + NOUT], ~entering, outer)):
         q = sign * traffic_side * t - hg
         rows = np.flatnonzero(base & part & (sign * c < 0) & (q > -w) & (q < (nl + REACH) * w))
         profiles = []
@@ -179,7 +188,8 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
                 continue
             prof = np.interp(grid, ss, tt)
             j = np.clip(np.searchsorted(ss, grid), 1, len(ss) - 1)
-            prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > MAX_GAP)] = np.nan
+            prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > MAX_GAP)
+                 | (grid >= end)] = np.nan
             profiles.append(prof)
         out.append(_longest(profiles, len(grid)))
     return out[0], out[1]
@@ -268,11 +278,16 @@ def lanes_side_by_side(T: np.ndarray, w: float, min_overlap: float) -> int:
     return side_by_side(T, w, min_overlap)[0]
 
 
-def side_by_side(T: np.ndarray, w: float, min_overlap: float) -> tuple[int, int]:
+def side_by_side(T: np.ndarray, w: float, min_overlap: float,
+                 inside: int | None = None) -> tuple[int, int]:
     """(:func:`lanes_side_by_side`, the number of parts compared: in a group of the whole
-    profiles)."""
-    whole = _positions(T, min_overlap)
+    profiles). Stations from column ``inside`` on (the entering profiles' reach beyond
+    ``track_radius``) are read on their own: read with the rest, the stretch where the
+    vehicles have not yet taken their lanes would dilute the separations near the box."""
+    whole = _positions(T[:, :inside], min_overlap)
     groups = whole + _positions(T[:, :int(NEAR_M / STEP)], min_overlap)
+    if inside is not None:
+        groups += _positions(T[:, inside:], min_overlap)
     return (max((_lanes_spanned(p, w) for p in groups), default=0),
             int(sum(len(p) for p in whole)))
 
@@ -299,13 +314,15 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
     arm_of_row, entering = nearest_arm(S, tr.xy), entering_rows(S, tr)
     inner = max(cfg.part_outside, STEP)
     outer = cfg.track_radius if math.isfinite(cfg.track_radius) else 150.0
+    inside = len(np.arange(inner, outer, STEP))          # stations within track_radius
     lpost = None
     for k in range(int(S[NARMS])):
         i0 = HDR + k * STRIDE
-        profiles = arm_profiles(S, k, tr, arm_of_row, entering, inner, outer, cfg.traffic_side)
+        profiles = arm_profiles(S, k, tr, arm_of_row, entering, inner, outer, cfg.traffic_side,
+                                cfg.side_by_side_reach)
         now = [int(S[i0 + NIN]), int(S[i0 + NOUT])]
         w = min(S[i0 + WID], cfg.lane_width) if cfg.side_by_side_width else S[i0 + WID]   # module doc
-        want = [counted(n, *side_by_side(T, w, cfg.side_by_side_overlap), cfg)
+        want = [counted(n, *side_by_side(T, w, cfg.side_by_side_overlap, inside), cfg)
                 for n, T in zip(now, profiles)]
         if want != now:
             (S, lpost), = refit_lane_candidates(post, S, k, [want])

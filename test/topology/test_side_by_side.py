@@ -227,3 +227,41 @@ def test_lanes_are_read_at_a_width_the_map_state_did_not_widen(capped, lanes):
     wide[HDR + k * STRIDE + NIN], wide[HDR + k * STRIDE + WID] = 1, 4.0
     S2, _ = fit_counts(post, wide.copy(), tr, cfg)
     assert S2[HDR + k * STRIDE + NIN] == lanes
+
+
+@pytest.mark.parametrize('reach,lanes', [(20.0, 2), (0.0, 1)])
+def test_a_lane_the_traffic_leaves_before_the_radius_is_read_beyond_it(reach, lanes):
+    """The vehicles of an arm's second entering lane change out of it (here: are not seen)
+    within 40 m of the center, inside ``track_radius``; 40-60 m out they drive beside the
+    others. With ``side_by_side_reach`` the profiles reach beyond the radius and show it."""
+    from .scenes import easy_intersection
+    gt = easy_intersection(lanes=((2, 1),) + ((1, 1),) * 3)
+    k = next(i for i, a in enumerate(gt.arms) if a.lanes_in == 2)
+    per_lane = 2                                            # scene()'s default
+    first = per_lane * (sum(a.lanes_in for a in gt.arms[:k]) + 1)   # trajectories()' order
+    dets = scene(gt, 'tracked', seed=3, clutter=10)
+    near = np.hypot(*(dets.xy - gt.center).T) < 40.0
+    dets = dets.subset(np.flatnonzero(~(near & np.isin(dets.track_id, [first, first + 1]))))
+    cfg = replace(CFG, track_radius=40.0, side_by_side_reach=reach)
+    post = tracked_posterior(cfg, gt)
+    S = pack_state(gt)
+    S[HDR + k * STRIDE + NIN] = 1
+    S2, _ = fit_counts(post, S.copy(), tracks_of(dets), cfg)
+    assert S2[HDR + k * STRIDE + NIN] == lanes
+
+
+def test_the_reach_beyond_the_radius_is_a_window_of_its_own():
+    """Stations from ``inside`` on (beyond ``track_radius``) are read on their own: a lane
+    that the parts show only there is counted, and the far stretch neither dilutes the
+    separations within nor adds to the parts compared there (which set the cap)."""
+    rng = np.random.default_rng(5)
+    grid = np.arange(12.0, 110.0, STEP)                     # 35 m beyond the radius
+    inside = int(np.sum(grid < 75.0))
+    T = _profiles([0.0, 0.1, -0.1, 0.05], rng, lo=12.0, hi=110.0, curve=0.0, grid=grid)
+    T[1, inside:] += W                                      # one lane over, beyond only
+    assert side_by_side(T, W, 8.0, inside) == (2, 4)
+    assert side_by_side(T, W, 8.0)[0] == 1                  # read with the rest: lost
+    T = _profiles([0.0, W], rng, lo=12.0, hi=110.0, curve=0.0, grid=grid)
+    T[1, :inside - 3] = np.nan                              # 4 m side by side within
+    assert side_by_side(T, W, 8.0, inside) == (2, 0)        # shown beyond, none compared
+    assert side_by_side(T, W, 8.0) == (2, 2)
