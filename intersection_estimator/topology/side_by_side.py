@@ -32,12 +32,15 @@ widths apart, no whole lane (SUMO ``topology_observed`` +0-2 points on four seed
 tracked and radar; Table I tracked and AV2 unchanged; docs/real_junctions.md, "Stop 48").
 
 The entering profiles reach ``side_by_side_reach`` (50 m) beyond ``track_radius``, read
-as a window of their own: vehicles that leave a lane for their turn before the radius show
-it side by side farther out (on the SUMO family a lane whose only vehicles were seen 75-100
-m out). Leaving lanes are not read there: beyond the box a road may gain lanes that the arm
-does not have at the box (AV2 scenario 2 gains one 75-100 m out). Read with the stations
-within the radius, the far stretch diluted their separations and lowered the cap
-(docs/real_junctions.md, "Stop 49").
+as a window of their own (:func:`lanes_beyond`): vehicles that leave a lane for their turn
+before the radius show it side by side farther out (on the SUMO family a lane whose only
+vehicles were seen 75-100 m out). Read with the stations within the radius, the far stretch
+diluted their separations. Far out the profiles' lateral band (``REACH`` lanes beyond the
+MAP's lanes) can hold another road, so parts more than ``ROAD_GAP`` lane widths beside the
+others are read as one (SUMO held-out seed 1067: a road 19 m beside read as lanes 3-6).
+Leaving lanes are not read there: beyond the box a road may gain lanes that the arm does
+not have at the box (AV2 scenario 2 gains one 75-100 m out; docs/real_junctions.md,
+"Stop 49").
 
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
@@ -60,7 +63,7 @@ from .refit import refit_lane_candidates
 from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
 
 __all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_frame', 'arm_profiles',
-           'lanes_side_by_side', 'side_by_side', 'counted', 'fit_counts']
+           'lanes_side_by_side', 'side_by_side', 'lanes_beyond', 'counted', 'fit_counts']
 
 #: station step of the lateral profiles [m]
 STEP = 2.0
@@ -77,6 +80,9 @@ MAX_GAP = 6.0
 REACH = 2.0
 #: at most this many parts per arm and direction (the longest) are compared
 MAX_PARTS = 64
+#: beyond the radius, parts more than this many lane widths beside the others drive another
+#: road (:func:`lanes_beyond`)
+ROAD_GAP = 2.5
 #: the lanes are counted over the whole profiles and over their first this many metres:
 #: a turn pocket's vehicles drive beside the others near the box only [m]
 NEAR_M = 36.0
@@ -278,29 +284,41 @@ def lanes_side_by_side(T: np.ndarray, w: float, min_overlap: float) -> int:
     return side_by_side(T, w, min_overlap)[0]
 
 
-def side_by_side(T: np.ndarray, w: float, min_overlap: float,
-                 inside: int | None = None) -> tuple[int, int]:
+def side_by_side(T: np.ndarray, w: float, min_overlap: float) -> tuple[int, int]:
     """(:func:`lanes_side_by_side`, the number of parts compared: in a group of the whole
-    profiles). Stations from column ``inside`` on (the entering profiles' reach beyond
-    ``track_radius``) are read on their own: read with the rest, the stretch where the
-    vehicles have not yet taken their lanes would dilute the separations near the box."""
-    whole = _positions(T[:, :inside], min_overlap)
+    profiles)."""
+    whole = _positions(T, min_overlap)
     groups = whole + _positions(T[:, :int(NEAR_M / STEP)], min_overlap)
-    if inside is not None:
-        groups += _positions(T[:, inside:], min_overlap)
     return (max((_lanes_spanned(p, w) for p in groups), default=0),
             int(sum(len(p) for p in whole)))
 
 
-def counted(n: int, shown: int, compared: int, cfg) -> int:
+def lanes_beyond(T: np.ndarray, w: float, min_overlap: float) -> int:
+    """Lanes that the stations ``T`` beyond ``track_radius`` show side by side, read on
+    their own (module doc: read with the stations within, the stretch where the vehicles
+    have not yet taken their lanes dilutes the separations near the box); 0 when no two
+    parts overlap there. Parts more than ``ROAD_GAP`` lane widths beside the others drive
+    another road: far out the lateral band of the profiles is wide enough to hold one."""
+    best = 0
+    for p in _positions(T, min_overlap):
+        p = np.sort(p)
+        for road in np.split(p, np.flatnonzero(np.diff(p) > ROAD_GAP * w) + 1):
+            best = max(best, _lanes_spanned(road, w))
+    return best
+
+
+def counted(n: int, shown: int, compared: int, cfg, beyond: int = 0) -> int:
     """Lane count of one arm direction given the MAP's ``n``, the lanes ``shown`` side by
-    side and the parts ``compared``: at least ``shown`` (up to ``max_lanes``); with at least
-    ``side_by_side_cap`` parts compared and a lane shown, at most one lane beyond them;
-    with ``side_by_side_single`` and no two parts side by side (nothing shown), one lane."""
-    want = min(cfg.max_lanes, max(n, shown))
-    if cfg.side_by_side_cap > 0 and compared >= cfg.side_by_side_cap and shown >= 1:
-        want = min(want, shown + 1)
-    if cfg.side_by_side_single and shown == 0:
+    side within ``track_radius``, the parts ``compared`` there and the lanes shown
+    ``beyond`` it (0 without the reach): at least the lanes shown within or beyond (up to
+    ``max_lanes``); with at least ``side_by_side_cap`` parts compared and a lane shown, at
+    most one lane beyond the most shown; with ``side_by_side_single``, no two parts side by
+    side within and no second lane shown beyond, one lane."""
+    most = max(shown, beyond)
+    want = min(cfg.max_lanes, max(n, most))
+    if cfg.side_by_side_cap > 0 and compared >= cfg.side_by_side_cap and most >= 1:
+        want = min(want, most + 1)
+    if cfg.side_by_side_single and shown == 0 and beyond <= 1:
         want = max(cfg.min_lanes, min(want, 1))
     return want
 
@@ -322,8 +340,9 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
                                 cfg.side_by_side_reach)
         now = [int(S[i0 + NIN]), int(S[i0 + NOUT])]
         w = min(S[i0 + WID], cfg.lane_width) if cfg.side_by_side_width else S[i0 + WID]   # module doc
-        want = [counted(n, *side_by_side(T, w, cfg.side_by_side_overlap, inside), cfg)
-                for n, T in zip(now, profiles)]
+        ov = cfg.side_by_side_overlap
+        want = [counted(n, *side_by_side(T[:, :inside], w, ov), cfg,
+                        lanes_beyond(T[:, inside:], w, ov)) for n, T in zip(now, profiles)]
         if want != now:
             (S, lpost), = refit_lane_candidates(post, S, k, [want])
     return S, lpost

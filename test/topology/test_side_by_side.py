@@ -11,7 +11,7 @@ import pytest
 from intersection_estimator.observations import Detections
 from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, counted,
-                                                          entering_rows, fit_counts,
+                                                          entering_rows, fit_counts, lanes_beyond,
                                                           lanes_side_by_side, nearest_arm,
                                                           side_by_side, tracks_of)
 from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, WID, pack_state
@@ -77,6 +77,20 @@ def test_the_parts_compared_are_counted():
 def test_counted(n, shown, compared, cap, single, want):
     cfg = replace(CFG, side_by_side_cap=cap, side_by_side_single=single)
     assert counted(n, shown, compared, cfg) == want
+    assert counted(n, shown, compared, cfg, beyond=0) == want
+
+
+@pytest.mark.parametrize('n,shown,compared,beyond,want', [
+    (1, 1, 4, 2, 2),                # raised by the lanes shown beyond the radius
+    (5, 1, 4, 3, 4),                # capped one lane beyond the most shown
+    (1, 0, 0, 2, 2),                # nothing shown within: raised to the lanes beyond
+    (3, 0, 0, 2, 3),                # ... no parts compared: the MAP's count stands
+    (3, 0, 0, 1, 1),                # one lane beyond shows no lane beside another
+    (1, 3, 4, 0, 3),                # nothing beyond: as without the reach
+])
+def test_counted_with_the_lanes_beyond_the_radius(n, shown, compared, beyond, want):
+    cfg = replace(CFG, side_by_side_cap=2, side_by_side_single=True)
+    assert counted(n, shown, compared, cfg, beyond) == want
 
 
 def test_an_arm_direction_without_parts_side_by_side_keeps_one_lane():
@@ -251,17 +265,27 @@ def test_a_lane_the_traffic_leaves_before_the_radius_is_read_beyond_it(reach, la
 
 
 def test_the_reach_beyond_the_radius_is_a_window_of_its_own():
-    """Stations from ``inside`` on (beyond ``track_radius``) are read on their own: a lane
-    that the parts show only there is counted, and the far stretch neither dilutes the
-    separations within nor adds to the parts compared there (which set the cap)."""
+    """The stations beyond ``track_radius`` are read on their own (``lanes_beyond``): a
+    lane that the parts show only there is counted there and lost when read with the
+    stations within, where the parts drive one lane; parts that overlap only beyond add
+    nothing to the parts compared within."""
     rng = np.random.default_rng(5)
     grid = np.arange(12.0, 110.0, STEP)                     # 35 m beyond the radius
     inside = int(np.sum(grid < 75.0))
     T = _profiles([0.0, 0.1, -0.1, 0.05], rng, lo=12.0, hi=110.0, curve=0.0, grid=grid)
     T[1, inside:] += W                                      # one lane over, beyond only
-    assert side_by_side(T, W, 8.0, inside) == (2, 4)
+    assert lanes_beyond(T[:, inside:], W, 8.0) == 2
+    assert side_by_side(T[:, :inside], W, 8.0) == (1, 4)
     assert side_by_side(T, W, 8.0)[0] == 1                  # read with the rest: lost
     T = _profiles([0.0, W], rng, lo=12.0, hi=110.0, curve=0.0, grid=grid)
     T[1, :inside - 3] = np.nan                              # 4 m side by side within
-    assert side_by_side(T, W, 8.0, inside) == (2, 0)        # shown beyond, none compared
-    assert side_by_side(T, W, 8.0) == (2, 2)
+    assert side_by_side(T[:, :inside], W, 8.0) == (0, 0)
+    assert lanes_beyond(T[:, inside:], W, 8.0) == 2
+
+
+def test_far_out_a_road_beside_is_not_lanes():
+    """Beyond the radius the lateral band holds another road: parts 5 lane widths beside
+    two lanes are read as their own road, not as lanes 3-6 of this one."""
+    T = _profiles([0.0, 0.1, W, 5 * W], np.random.default_rng(6), curve=0.0)
+    assert lanes_beyond(T, W, 8.0) == 2
+    assert lanes_side_by_side(T, W, 8.0) == 6               # the whole-number rule alone
