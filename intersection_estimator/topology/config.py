@@ -192,6 +192,9 @@ RANGES = {
     'side_by_side_reach': ('[0, 1000]', 'entering lanes side by side are also read from '
                            'trajectory rows up to this far beyond track_radius, as a window of '
                            'their own (topology/side_by_side.py) [m]'),
+    'side_by_side_occupied': (None, 'a lane count above the lanes shown side by side drops '
+                              'by one lane when a lane holds no trajectory part\'s median '
+                              'position (topology/side_by_side.py)'),
     'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
                       'trajectory parts are and the state with it is at most this many nats '
                       'below the state without (0: off; topology/weak_arms.py) [nats]'),
@@ -200,6 +203,10 @@ RANGES = {
                          'out on its axis'),
     'weak_arm_box': ('(part_outside, inf)', 'the tracks of an added arm drive it across the line this far '
                      'out on its axis: the road leads to the junction [m]'),
+    'empty_arm_drop': (None, 'windows with tracked objects (not the radar tracker\'s): an arm '
+                       'that, its lane counts set, explains fewer than weak_arm_support passages '
+                       'and along which as few tracks drove between part_outside and '
+                       'weak_arm_box is left out (topology/support.py)'),
     # anytime API
     'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
     'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),
@@ -337,9 +344,11 @@ class TopologyConfig:
     side_by_side_single: bool = True
     side_by_side_width: bool = True      # docs/real_junctions.md, "Stop 48"
     side_by_side_reach: float = 50.0     # docs/real_junctions.md, "Stop 49"
+    side_by_side_occupied: bool = True   # docs/real_junctions.md, "Stop 50"
     weak_arm_nats: float = 1.0
     weak_arm_support: float = 1.0
     weak_arm_box: float = 25.0
+    empty_arm_drop: bool = True         # docs/real_junctions.md, "Stop 50"
     # anytime API
     chunk: int = 500
     converge_window: int = 2000

@@ -346,6 +346,15 @@ class TopologyEstimator:
             return replace(self.cfg, descent_add_support=self.cfg.radar_tracks_add_support)
         return self.cfg
 
+    @property
+    def _report_cfg(self) -> TopologyConfig:
+        """The reported estimate's settings: a window whose tracks all come from the radar
+        tracker leaves no arm out by :func:`.support.drop_empty_arms` (its broken tracks
+        drive real arms next to the box too seldom to tell them from junk ones)."""
+        if self._radar_tracks and self.cfg.empty_arm_drop:
+            return replace(self.cfg, empty_arm_drop=False)
+        return self.cfg
+
     def _track_convergence(self) -> None:
         """Note a gain of more than ``converge_tol``; re-preprocess when the best center
         moved more than ``recenter_threshold`` soon after new data."""
@@ -363,7 +372,7 @@ class TopologyEstimator:
         c = self._best_chain()
         key = (c.best_S.tobytes(), self.preprocess_count)
         if self._rep_key != key:
-            self._rep = reported(self._post, c.best_S, c.best_lpost, self.cfg,
+            self._rep = reported(self._post, c.best_S, c.best_lpost, self._report_cfg,
                                  self._window_tracks())
             self._rep_key = key
         return self._rep

@@ -27,9 +27,9 @@ from .moves import remove_arm_at
 from .side_by_side import Tracks, fit_counts
 from .state import NARMS
 from .unexplained import arm_support
-from .weak_arms import add_weak_arms
+from .weak_arms import add_weak_arms, near_tracks
 
-__all__ = ['arm_support', 'reported']
+__all__ = ['arm_support', 'drop_empty_arms', 'reported']
 
 
 def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks | None = None):
@@ -59,4 +59,29 @@ def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks |
         if raised is not None:
             lpost = raised
             sup = arm_support(post, S, cfg.clutter_floor)
+    if tracks is not None and cfg.empty_arm_drop and len(post.obs):
+        S2, sup2 = drop_empty_arms(post, S, sup, cfg, tracks)
+        if S2 is not S:
+            S, sup, lpost = S2, sup2, post(S2)
     return S, 1.0 - np.exp(-sup / 3.0), lpost
+
+
+def drop_empty_arms(post: Posterior, S: np.ndarray, sup: np.ndarray, cfg, tracks: Tracks):
+    """``(S, support)`` without the arms that, their lane counts set, explain fewer than
+    ``weak_arm_support`` vehicle passages and along which fewer than as many tracks drove
+    between ``part_outside`` and ``weak_arm_box`` (:func:`.weak_arms.near_tracks`, parts of
+    ``min_part_points`` rows). Such an arm is the MAP's many-lane side that reached onto a
+    curved neighbouring approach's traffic; once :mod:`.side_by_side` set its counts,
+    nothing is left on it. Weakest first, down to ``min_arms``; the same ``S`` when none is
+    left out."""
+    bar = cfg.weak_arm_support
+    while int(S[NARMS]) > cfg.min_arms:
+        empty = [k for k in range(int(S[NARMS])) if sup[k] < bar
+                 and near_tracks(S, k, tracks, cfg.part_outside, cfg.weak_arm_box,
+                                 cfg.min_part_points) < bar]
+        if not empty:
+            break
+        S2 = S.copy()
+        remove_arm_at(S, S2, post.t.P, post.t.logqn, min(empty, key=lambda k: sup[k]))
+        S, sup = S2, arm_support(post, S2, cfg.clutter_floor)
+    return S, sup

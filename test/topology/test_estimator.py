@@ -154,7 +154,7 @@ def test_tracked_windows_take_the_wide_gap_and_voxel_windows_clamp_it():
     """``gap_max_tracked``: a window with tracked objects samples median gaps up to it (a
     wide median, or the lanes of a direction no vehicle drove); the straight-lane truth of
     a 6 m median is found. A window that loses its tracks takes ``gap_max`` again and every
-    chain's gap is clamped to it. Bounded at 4 m, the same data get extra lanes."""
+    chain's gap is clamped to it. Bounded at 4 m, the MAP of the same data has extra lanes."""
     from intersection_estimator.topology.state import P_GAP_MAX
     from .scenes import easy_intersection, same_topology, scene
     inter = easy_intersection(4, lanes=((1, 1), (2, 1), (1, 2), (1, 1)), gap=6.0)
@@ -168,7 +168,13 @@ def test_tracked_windows_take_the_wide_gap_and_voxel_windows_clamp_it():
     assert est._tables.P[P_GAP_MAX] == 4.0
     assert all(a.gap <= 4.0 for a in est.best.arms)
     assert TopologyConfig(gap_max_tracked=0.0).for_tracks().gap_max == 4.0
-    narrow = TopologyEstimator(TopologyConfig(gap_max=4.0, gap_max_tracked=0.0), seed=1)
+    narrow = TopologyEstimator(TopologyConfig(gap_max=4.0, gap_max_tracked=0.0,
+                                              side_by_side_occupied=False), seed=1)
     narrow.set_observations(scene(inter, 'tracked', seed=3))
     narrow.run(n_samples=4000)              # the 4 m bound fills the median with lanes
     assert not same_topology(inter, narrow.best, tol_deg=5.0)
+    # ... which no vehicle drove: the reported counts leave them out (side_by_side.occupied)
+    narrow = TopologyEstimator(TopologyConfig(gap_max=4.0, gap_max_tracked=0.0), seed=1)
+    narrow.set_observations(scene(inter, 'tracked', seed=3))
+    narrow.run(n_samples=4000)
+    assert same_topology(inter, narrow.best, tol_deg=5.0)

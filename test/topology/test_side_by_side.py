@@ -12,7 +12,7 @@ from intersection_estimator.observations import Detections
 from intersection_estimator.topology import TopologyConfig
 from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, counted,
                                                           entering_rows, fit_counts, lanes_beyond,
-                                                          lanes_side_by_side, nearest_arm,
+                                                          lanes_side_by_side, nearest_arm, occupied,
                                                           side_by_side, tracks_of)
 from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, WID, pack_state
 from intersection_estimator.topology.support import reported
@@ -122,7 +122,8 @@ def test_an_arm_direction_without_parts_side_by_side_keeps_one_lane():
     assert side_by_side(T_lone, gt.arms[3].lane_width, 8.0)[0] == 0
     S2, lp = fit_counts(post, more.copy(), lone, CFG)
     assert lp is not None and S2[HDR + 3 * STRIDE + NOUT] == 1
-    kept, lp = fit_counts(post, more.copy(), lone, replace(CFG, side_by_side_single=False))
+    kept, lp = fit_counts(post, more.copy(), lone, replace(CFG, side_by_side_single=False,
+                                                           side_by_side_occupied=False))
     assert kept[HDR + 3 * STRIDE + NOUT] == 3
 
 
@@ -206,7 +207,8 @@ def test_lanes_far_beyond_what_the_traffic_shows_are_capped():
     more[HDR + 3 * STRIDE + NIN] = 4
     S2, lp = fit_counts(post, more.copy(), tr, CFG)
     assert lp is not None and S2[HDR + 3 * STRIDE + NIN] == 3
-    kept, lp = fit_counts(post, more.copy(), tr, replace(CFG, side_by_side_cap=0))
+    kept, lp = fit_counts(post, more.copy(), tr, replace(CFG, side_by_side_cap=0,
+                                                         side_by_side_occupied=False))
     assert lp is None and kept[HDR + 3 * STRIDE + NIN] == 4
 
 
@@ -289,3 +291,21 @@ def test_far_out_a_road_beside_is_not_lanes():
     T = _profiles([0.0, 0.1, W, 5 * W], np.random.default_rng(6), curve=0.0)
     assert lanes_beyond(T, W, 8.0) == 2
     assert lanes_side_by_side(T, W, 8.0) == 6               # the whole-number rule alone
+
+
+def test_a_lane_beyond_those_shown_that_no_part_drove_is_left_out():
+    """Arm 3's four entering parts drive its 2 lanes: a state with 3 keeps them under the
+    cap, and with ``side_by_side_occupied`` drops the third, which holds no part."""
+    gt = EASY[0]
+    post = tracked_posterior(CFG, gt)
+    tr = tracks_of(scene(gt, 'tracked', seed=3, clutter=10))
+    S = pack_state(gt)
+    T_in, _ = arm_profiles(S, 3, tr, nearest_arm(S, tr.xy), entering_rows(S, tr), 12.0, 75.0)
+    assert occupied(S, 3, T_in, 0) == 2 and occupied(S, 3, T_in[:0], 0) == 0
+    more = S.copy()
+    more[HDR + 3 * STRIDE + NIN] = 3
+    assert occupied(more, 3, T_in, 0) == 2
+    kept, lp = fit_counts(post, more.copy(), tr, replace(CFG, side_by_side_occupied=False))
+    assert lp is None and kept[HDR + 3 * STRIDE + NIN] == 3
+    S2, lp = fit_counts(post, more.copy(), tr, CFG)
+    assert S2[HDR + 3 * STRIDE + NIN] == 2 and lp == pytest.approx(post(S2))

@@ -1,6 +1,7 @@
 """The reported estimate: arms that explain too few vehicle passages are left out."""
 
 import copy
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -57,3 +58,37 @@ def test_support_never_drops_below_min_arms():
     post = Posterior(Tables(cfg), est.observations)
     R, _, _ = reported(post, pack_state(extra), 0.0, cfg)
     assert int(R[2]) == 3
+
+
+def test_an_arm_that_explains_nothing_and_no_track_drove_is_left_out():
+    """The MAP's arm with no passage and no track along it next to the box (a junk side
+    reaching onto another approach) is left out; the same arm with one vehicle driving it
+    stays; ``min_arms`` still holds."""
+    from intersection_estimator.topology.side_by_side import tracks_of
+    from intersection_estimator.topology.support import drop_empty_arms
+    from .test_weak_arms import CFG, GT, _dets, _lone_vehicle, _posterior
+    S = pack_state(GT)                                   # four arms, arm LONE undriven
+    dets = _dets()
+    post, tr = _posterior(dets), tracks_of(dets)
+    sup = arm_support(post, S, CFG.clutter_floor)
+    R, sup2 = drop_empty_arms(post, S, sup, CFG, tr)
+    assert int(R[2]) == 3 and len(sup2) == 3
+    assert drop_empty_arms(post, S, sup, replace(CFG, min_arms=4), tr)[0] is S
+    assert int(reported(post, S, post(S), replace(CFG, empty_arm_drop=True), tr)[0][2]) == 3
+    driven = _dets([_lone_vehicle])
+    post, tr = _posterior(driven), tracks_of(driven)
+    sup = arm_support(post, S, CFG.clutter_floor)
+    assert drop_empty_arms(post, S, sup, CFG, tr)[0] is S
+
+
+def test_a_window_of_radar_tracker_tracks_leaves_no_empty_arm_out():
+    """The radar tracker's tracks break next to the box: real arms look empty there, so
+    such a window reports its arms as the MAP and the counts leave them."""
+    from intersection_estimator.tracking.tracker import RADAR_TRACK_ID0
+    from .test_weak_arms import CFG, _dets
+    dets = _dets()
+    est = TopologyEstimator(replace(CFG, empty_arm_drop=True), seed=0)
+    est.set_observations(dets)
+    assert est._report_cfg.empty_arm_drop
+    est.set_observations(replace(dets, track_id=dets.track_id + RADAR_TRACK_ID0))
+    assert not est._report_cfg.empty_arm_drop

@@ -19,7 +19,7 @@ from intersection_estimator.topology.side_by_side import tracks_of
 from intersection_estimator.topology.state import NARMS, arm_angles, pack_state
 from intersection_estimator.topology.support import reported
 from intersection_estimator.topology.unexplained import best_new_arm, unexplained_angles
-from intersection_estimator.topology.weak_arms import add_weak_arms, box_tracks
+from intersection_estimator.topology.weak_arms import add_weak_arms, box_tracks, near_tracks
 
 from .scenes import EASY, _lane_point, trajectories
 
@@ -133,3 +133,15 @@ def test_a_box_line_inside_part_outside_is_refused_by_name():
     with pytest.raises(ValueError, match='weak_arm_box'):
         TopologyConfig(weak_arm_box=10.0).validate()        # part_outside is 12 m
     TopologyConfig(weak_arm_box=30.0).validate()
+
+
+def test_a_road_seen_only_next_to_the_box_has_near_tracks_but_no_box_tracks():
+    """A vehicle that leaves the sensor 20 m out on arm ``LONE`` drove it next to the box
+    (``near_tracks``) without crossing the 25 m line (``box_tracks``); the other arms'
+    traffic (another heading) counts for neither."""
+    S = pack_state(GT)
+    short = tracks_of(_dets([lambda rng, tid: _lone_vehicle(rng, tid, far=20.0)]))
+    assert near_tracks(S, LONE, short, 12.0, 25.0, 3) == 1
+    assert box_tracks(S, LONE, short, 12.0, 25.0) == 0
+    assert near_tracks(S, LONE, tracks_of(_dets()), 12.0, 25.0, 3) == 0
+    assert near_tracks(S, LONE, short, 12.0, 25.0, 100) == 0      # too few rows
