@@ -168,6 +168,12 @@ def arm_frame(S, k, xy: np.ndarray, h: np.ndarray):
             h[:, 0] * ux + h[:, 1] * uy)
 
 
+def stations(inner: float, outer: float) -> np.ndarray:
+    """The profiles' stations along an arm: ``inner, inner + STEP, ... < outer`` [m]
+    (:func:`arm_profiles`; :func:`fit_counts` counts those within ``track_radius``)."""
+    return np.arange(inner, outer, STEP)
+
+
 def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: float,
                  traffic_side: int = 1, reach: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Lateral profiles of the trajectory parts on arm ``k`` of ``S``, entering and
@@ -177,7 +183,7 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
     heading along the axis within ``ALIGN_DEG`` the part's way, beyond ``inner`` and within
     ``REACH`` lane widths beyond the arm's lanes of that direction (the likelihood's
     lateral coordinate, :func:`.likelihood._closest_lane`)."""
-    grid = np.arange(inner, outer + reach, STEP)
+    grid = stations(inner, outer + reach)
     mine = np.flatnonzero(arm_of_row == k)
     tix, entering = tr.tix[mine], entering[mine]
     s, t, c = arm_frame(S, k, tr.xy[mine], tr.h[mine])
@@ -354,7 +360,7 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
     arm_of_row, entering = nearest_arm(S, tr.xy), entering_rows(S, tr)
     inner = max(cfg.part_outside, STEP)
     outer = cfg.track_radius if math.isfinite(cfg.track_radius) else 150.0
-    inside = len(np.arange(inner, outer, STEP))          # stations within track_radius
+    inside = len(stations(inner, outer))                 # stations within track_radius
     lpost = None
     for k in range(int(S[NARMS])):
         i0 = HDR + k * STRIDE
