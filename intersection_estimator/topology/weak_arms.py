@@ -37,15 +37,16 @@ __all__ = ['add_weak_arms', 'box_tracks', 'near_tracks']
 
 
 def _on_arm(S: np.ndarray, k: int, tr: Tracks, outside: float):
-    """``(on, s)``: the rows of ``tr`` that head along arm ``k`` of ``S`` (within
+    """``(on, s, n)``: the rows of ``tr`` that head along arm ``k`` of ``S`` (within
     :data:`.side_by_side.ALIGN_DEG`), beside its lanes (within :data:`.side_by_side.REACH`
-    lane widths) and at least ``outside`` metres out on its axis; ``s`` their distance out."""
+    lane widths) and at least ``outside`` metres out on its axis; ``s`` every row's distance
+    out; ``n`` the number of tracks (the length of a per-track count)."""
     i0 = HDR + k * STRIDE
     s, t, c = arm_frame(S, k, tr.xy, tr.h)
     reach = 0.5 * S[i0 + GAP] + (max(S[i0 + NIN], S[i0 + NOUT]) + REACH) * S[i0 + WID]
     on = ((np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))
           & (np.abs(t) <= reach) & (s >= outside))
-    return on, s
+    return on, s, (int(tr.tix[-1]) + 1 if len(tr.tix) else 0)
 
 
 def box_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float) -> int:
@@ -53,8 +54,7 @@ def box_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float) ->
     axis: rows on the arm (:func:`_on_arm`) both between ``outside`` and ``box`` metres out
     and beyond. The road leads to the junction: a false track far out does not cross, nor
     does a vehicle of a neighbouring arm (another heading)."""
-    on, s = _on_arm(S, k, tr, outside)
-    n = int(tr.tix[-1]) + 1 if len(tr.tix) else 0
+    on, s, n = _on_arm(S, k, tr, outside)
     near = np.bincount(tr.tix[on & (s <= box)], minlength=n) > 0
     far = np.bincount(tr.tix[on & (s > box)], minlength=n) > 0
     return int((near & far).sum())
@@ -65,8 +65,7 @@ def near_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float,
     """Tracks with at least ``min_rows`` rows on arm ``k`` of ``S`` (:func:`_on_arm`)
     between ``outside`` and ``box`` metres out: vehicles that drove the arm next to the box,
     also where the road comes into view only there (a side road behind a corner)."""
-    on, s = _on_arm(S, k, tr, outside)
-    n = int(tr.tix[-1]) + 1 if len(tr.tix) else 0
+    on, s, n = _on_arm(S, k, tr, outside)
     return int((np.bincount(tr.tix[on & (s <= box)], minlength=n) >= min_rows).sum())
 
 
