@@ -168,6 +168,13 @@ def arm_frame(S, k, xy: np.ndarray, h: np.ndarray):
             h[:, 0] * ux + h[:, 1] * uy)
 
 
+def _across(S, k: int, t, sign: float, traffic_side: int) -> np.ndarray:
+    """Lateral offsets ``t`` (:func:`arm_frame`) of arm ``k`` of ``S`` as the distance
+    across the lanes of one direction (``sign`` 1 entering, -1 leaving) from its median
+    edge: lane ``j`` spans ``[j w, (j + 1) w)`` (the likelihood's lateral coordinate)."""
+    return sign * traffic_side * np.asarray(t) - 0.5 * S[HDR + k * STRIDE + GAP]
+
+
 def stations(inner: float, outer: float) -> np.ndarray:
     """The profiles' stations along an arm: ``inner, inner + STEP, ... < outer`` [m]
     (:func:`arm_profiles`; :func:`fit_counts` counts those within ``track_radius``)."""
@@ -188,12 +195,12 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
     tix, entering = tr.tix[mine], entering[mine]
     s, t, c = arm_frame(S, k, tr.xy[mine], tr.h[mine])
     i0 = HDR + k * STRIDE
-    w, hg = S[i0 + WID], 0.5 * S[i0 + GAP]
+    w = S[i0 + WID]
     base = (s >= inner) & (np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))
     out = []
     for sign, nl, part, end in ((1.0, S[i0 + NIN], entering, outer + reach),
                                 (-1.0, S[i0 + NOUT], ~entering, outer)):
-        q = sign * traffic_side * t - hg
+        q = _across(S, k, t, sign, traffic_side)
         rows = np.flatnonzero(base & part & (sign * c < 0) & (q > -w) & (q < (nl + REACH) * w))
         profiles = []
         for g in np.split(rows, np.flatnonzero(np.diff(tix[rows])) + 1):
@@ -323,16 +330,12 @@ def occupied(S, k: int, T: np.ndarray, side: int, traffic_side: int = 1) -> int:
     the median lateral position of at least one profile of ``T`` (:func:`arm_profiles`),
     counted from the median side; positions beyond the outermost lane count for it."""
     i0 = HDR + k * STRIDE
-    n = int(S[i0 + (NIN if side == 0 else NOUT)])
-    if len(T) == 0 or n <= 0:
-        return 0
     ok = np.isfinite(T).any(1)
     if not ok.any():
         return 0
-    sign = 1.0 if side == 0 else -1.0
-    q = sign * traffic_side * np.nanmedian(T[ok], axis=1) - 0.5 * S[i0 + GAP]
-    lane = np.clip(np.floor(q / S[i0 + WID]), 0, n - 1).astype(int)
-    return int(len(np.unique(lane)))
+    q = _across(S, k, np.nanmedian(T[ok], axis=1), 1.0 if side == 0 else -1.0, traffic_side)
+    n = int(S[i0 + (NIN if side == 0 else NOUT)])
+    return len(np.unique(np.clip(np.floor(q / S[i0 + WID]), 0, n - 1)))
 
 
 def counted(n: int, shown: int, compared: int, cfg, beyond: int = 0) -> int:

@@ -40,16 +40,10 @@ def reported(post: Posterior, S: np.ndarray, lpost: float, cfg, tracks: Tracks |
     (:mod:`.side_by_side`)."""
     S = S.copy()
     sup = arm_support(post, S, cfg.clutter_floor)
-    changed = False
-    while (len(post.obs) and int(S[NARMS]) > cfg.min_arms
-           and sup.min() < cfg.min_arm_support):
-        S2 = S.copy()
-        remove_arm_at(S, S2, post.t.P, post.t.logqn, int(np.argmin(sup)))
-        S = S2
-        sup = arm_support(post, S, cfg.clutter_floor)
-        changed = True
-    if changed:
-        lpost = post(S)
+    if len(post.obs):
+        S2, sup = _leave_out(post, S, sup, cfg, lambda S, sup, k: sup[k] < cfg.min_arm_support)
+        if S2 is not S:
+            S, lpost = S2, post(S2)
     if tracks is not None:
         S2, lpost = add_weak_arms(post, S, lpost, cfg, tracks)
         if S2 is not S:                       # an arm was added
@@ -75,13 +69,19 @@ def drop_empty_arms(post: Posterior, S: np.ndarray, sup: np.ndarray, cfg, tracks
     nothing is left on it. Weakest first, down to ``min_arms``; the same ``S`` when none is
     left out."""
     bar = cfg.weak_arm_support
+    return _leave_out(post, S, sup, cfg, lambda S, sup, k: sup[k] < bar and near_tracks(
+        S, k, tracks, cfg.part_outside, cfg.weak_arm_box, cfg.min_part_points) < bar)
+
+
+def _leave_out(post: Posterior, S: np.ndarray, sup: np.ndarray, cfg, out):
+    """``(S, support)`` without the arms ``out(S, support, k)`` names, the weakest first
+    (support recomputed after each), down to ``min_arms``; the same ``S`` when none is left
+    out."""
     while int(S[NARMS]) > cfg.min_arms:
-        empty = [k for k in range(int(S[NARMS])) if sup[k] < bar
-                 and near_tracks(S, k, tracks, cfg.part_outside, cfg.weak_arm_box,
-                                 cfg.min_part_points) < bar]
-        if not empty:
+        cand = [k for k in range(int(S[NARMS])) if out(S, sup, k)]
+        if not cand:
             break
         S2 = S.copy()
-        remove_arm_at(S, S2, post.t.P, post.t.logqn, min(empty, key=lambda k: sup[k]))
+        remove_arm_at(S, S2, post.t.P, post.t.logqn, min(cand, key=lambda k: sup[k]))
         S, sup = S2, arm_support(post, S2, cfg.clutter_floor)
     return S, sup
