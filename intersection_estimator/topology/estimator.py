@@ -325,7 +325,7 @@ class TopologyEstimator:
         post = self._post
         post.work = self.work['descent']
         try:
-            res = descend(c.best_S, self._descent_cfg, post, self._rng, deadline)
+            res = descend(c.best_S, self._window_cfg, post, self._rng, deadline)
         finally:
             post.work = self.work['chain']
         if res.lpost > c.best_lpost:
@@ -337,23 +337,19 @@ class TopologyEstimator:
         return res.samples
 
     @property
-    def _descent_cfg(self) -> TopologyConfig:
-        """The descent's settings: a window whose tracks all come from the radar tracker
-        adds arms for unexplained parts from ``radar_tracks_add_support`` passages (a radar
-        track that breaks inside the box leaves parts no arm explains)."""
-        if self._radar_tracks and \
-                self.cfg.radar_tracks_add_support != self.cfg.descent_add_support:
-            return replace(self.cfg, descent_add_support=self.cfg.radar_tracks_add_support)
-        return self.cfg
-
-    @property
-    def _report_cfg(self) -> TopologyConfig:
-        """The reported estimate's settings: a window whose tracks all come from the radar
-        tracker leaves no arm out by :func:`.support.drop_empty_arms` (its broken tracks
-        drive real arms next to the box too seldom to tell them from junk ones)."""
-        if self._radar_tracks and self.cfg.empty_arm_drop:
-            return replace(self.cfg, empty_arm_drop=False)
-        return self.cfg
+    def _window_cfg(self) -> TopologyConfig:
+        """The settings of this window's descent and reported estimate. A window whose
+        tracks all come from the radar tracker adds arms for unexplained parts from
+        ``radar_tracks_add_support`` passages (a radar track that breaks inside the box
+        leaves parts no arm explains) and leaves no arm out by
+        :func:`.support.drop_empty_arms` (its broken tracks drive real arms next to the box
+        too seldom to tell them from junk ones). Each setting is read by one of the two
+        steps only (``descent_add_support`` by the descent, ``empty_arm_drop`` by the
+        report)."""
+        if not self._radar_tracks:
+            return self.cfg
+        return replace(self.cfg, descent_add_support=self.cfg.radar_tracks_add_support,
+                       empty_arm_drop=False)
 
     def _track_convergence(self) -> None:
         """Note a gain of more than ``converge_tol``; re-preprocess when the best center
@@ -372,7 +368,7 @@ class TopologyEstimator:
         c = self._best_chain()
         key = (c.best_S.tobytes(), self.preprocess_count)
         if self._rep_key != key:
-            self._rep = reported(self._post, c.best_S, c.best_lpost, self._report_cfg,
+            self._rep = reported(self._post, c.best_S, c.best_lpost, self._window_cfg,
                                  self._window_tracks())
             self._rep_key = key
         return self._rep

@@ -89,6 +89,6 @@ def test_a_window_of_radar_tracker_tracks_leaves_no_empty_arm_out():
     dets = _dets()
     est = TopologyEstimator(replace(CFG, empty_arm_drop=True), seed=0)
     est.set_observations(dets)
-    assert est._report_cfg.empty_arm_drop
+    assert est._window_cfg.empty_arm_drop
     est.set_observations(replace(dets, track_id=dets.track_id + RADAR_TRACK_ID0))
-    assert not est._report_cfg.empty_arm_drop
+    assert not est._window_cfg.empty_arm_drop

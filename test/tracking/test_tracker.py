@@ -202,10 +202,10 @@ def test_a_window_of_radar_tracks_adds_no_arm_for_unexplained_parts():
     tracks = track_radar(dets)
     est = TopologyEstimator(TopologyConfig(), 0)
     est.set_observations(tracks)
-    assert est._descent_cfg.descent_add_support == TopologyConfig().radar_tracks_add_support == 0
+    assert est._window_cfg.descent_add_support == TopologyConfig().radar_tracks_add_support == 0
     own = dataclasses.replace(tracks, track_id=tracks.track_id - RADAR_TRACK_ID0)
     est.set_observations(own)
-    assert est._descent_cfg.descent_add_support == TopologyConfig().descent_add_support > 0
+    assert est._window_cfg.descent_add_support == TopologyConfig().descent_add_support > 0
 
 
 def test_rows_without_a_sensor_position_are_tracked_without_the_doppler():
