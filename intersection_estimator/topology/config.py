@@ -195,6 +195,9 @@ RANGES = {
     'side_by_side_occupied': (None, 'a lane count above the lanes shown side by side drops '
                               'by one lane when a lane holds no trajectory part\'s median '
                               'position (topology/side_by_side.py)'),
+    'side_by_side_queues': ('[0, 100]', 'queues of at least this many vehicles standing on an '
+                            'arm\'s entering side count as trajectory parts of their lanes side '
+                            'by side (0: off; topology/side_by_side.py)'),
     'weak_arm_nats': ('[0, 100]', 'windows with trajectories: an arm is added where unexplained '
                       'trajectory parts are and the state with it is at most this many nats '
                       'below the state without (0: off; topology/weak_arms.py) [nats]'),
@@ -345,6 +348,7 @@ class TopologyConfig:
     side_by_side_width: bool = True      # docs/real_junctions.md, "Stop 48"
     side_by_side_reach: float = 50.0     # docs/real_junctions.md, "Stop 49"
     side_by_side_occupied: bool = True   # docs/real_junctions.md, "Stop 50"
+    side_by_side_queues: int = 3         # docs/real_junctions.md, "Stop 51"
     weak_arm_nats: float = 1.0
     weak_arm_support: float = 1.0
     weak_arm_box: float = 25.0

@@ -289,7 +289,9 @@ class TopologyEstimator:
         if not (self._tracked and (cfg.side_by_side_overlap > 0 or cfg.weak_arm_nats > 0)):
             return None
         if self._tracks is None:
-            self._tracks = tracks_of(self._dets, cfg.weak_labels, cfg.min_track_speed)
+            self._tracks = tracks_of(self._dets, cfg.weak_labels, cfg.min_track_speed,
+                                     (cfg.standing_min_s, cfg.side_by_side_queues)
+                                     if cfg.side_by_side_queues else None)
         return self._tracks
 
     def _advance(self, m: int, deadline: float) -> int:

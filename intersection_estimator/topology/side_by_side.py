@@ -47,6 +47,18 @@ Leaving lanes are not read there: beyond the box a road may gain lanes that the 
 not have at the box (AV2 scenario 2 gains one 75-100 m out; docs/real_junctions.md,
 "Stop 49").
 
+A queue shows its lane too (``side_by_side_queues``, the fewest vehicles of a queue; 3).
+Tracks that are never fast are not trajectory parts (:func:`.preprocess.moving_tracks`),
+so a lane whose vehicles only queued at the light -- a turn lane through a red phase beside
+the lane the moving traffic took -- showed nothing here. Its vehicles stand one behind the
+other on the lane (:func:`.standing.queue_groups`), so the line through their positions is
+a lateral profile of that lane over the queue's stretch and is compared with the moving
+parts like one (:func:`_queue_profiles`). Two vehicles are not a queue here (on the SUMO
+family three dev arms gained a lane from a pair parked at the kerb), and a queue farther
+than ``ROAD_GAP`` lane widths from every moving part stands on another road (one dev arm
+read a 10-vehicle queue on a parallel road as lanes 3-6). SUMO ``topology_observed`` +2.5
+points on dev seeds, +7 on held-out seeds (docs/real_junctions.md, "Stop 51").
+
 A row enters a profile only while it heads along the arm (``ALIGN_DEG``), by the tracker's
 heading where the rows carry one: headings from noisy positions let turning rows inside a
 large box through and raised 10 of 400 Table I arms, the tracker's none. Measured on the
@@ -63,8 +75,9 @@ from typing import NamedTuple
 import numpy as np
 
 from ..observations import Detections
-from .preprocess import moving_tracks
+from .preprocess import moving_mask, track_bounds
 from .refit import refit_lane_candidates
+from .standing import QUEUE_GAP_M, queue_groups, standing_tracks
 from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
 
 __all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_frame', 'arm_profiles',
@@ -95,22 +108,33 @@ NEAR_M = 36.0
 
 class Tracks(NamedTuple):
     """Tracked rows sorted by track and time: positions, unit headings from the path and
-    the track index of every row."""
+    the track index of every row; and the vehicles that stand in queues (mean positions,
+    unit headings, queue index; :func:`tracks_of`)."""
 
     xy: np.ndarray
     h: np.ndarray
     tix: np.ndarray
+    qxy: np.ndarray = np.zeros((0, 2))
+    qh: np.ndarray = np.zeros((0, 2))
+    qix: np.ndarray = np.zeros(0, np.int64)
 
 
-def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0) -> Tracks | None:
+def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0,
+              queue: tuple[float, int] | None = None) -> Tracks | None:
     """The tracked rows of ``dets`` (``track_id >= 0``) sorted per track, without road
     users that do not keep to a lane (labels in ``skip_labels``) and without static (false)
     tracks, never faster than ``min_speed`` where the speed is known (as
-    :func:`.preprocess.tracked_observations`); None without tracks."""
+    :func:`.preprocess.tracked_observations`); None without tracks. ``queue = (min_s,
+    min_len)``: also the static tracks that lived ``min_s`` and stand in a queue of at least
+    ``min_len`` (:mod:`.standing`), one row each."""
     sel = dets.track_id >= 0
     if len(skip_labels):
         sel &= ~np.isin(dets.label, np.asarray(skip_labels, np.int64))
-    order, starts, ends = moving_tracks(dets, sel, min_speed)
+    order, starts, ends = track_bounds(dets, sel)
+    moving = moving_mask(dets, order, starts, min_speed)
+    still = (standing_tracks(dets, order, starts, ends, ~moving, queue[0])
+             if queue is not None else None)
+    order, starts, ends = order, starts[moving], ends[moving]
     if len(starts) == 0:
         return None
     rows = np.concatenate([order[a:b] for a, b in zip(starts, ends)])
@@ -120,7 +144,12 @@ def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0) -> Track
     h = np.stack([np.cos(hd), np.sin(hd)], axis=1)
     if not known.all():
         h[~known] = _path_directions(xy, new)[~known]
-    return Tracks(xy, h, np.cumsum(new) - 1)
+    if still is None:
+        return Tracks(xy, h, np.cumsum(new) - 1)
+    qxy, qh, _ = still
+    ok = np.isfinite(qh[:, 0])
+    qix = queue_groups(qxy[ok], qh[ok], max(queue[1], 2))
+    return Tracks(xy, h, np.cumsum(new) - 1, qxy[ok][qix >= 0], qh[ok][qix >= 0], qix[qix >= 0])
 
 
 def _path_directions(xy: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -215,8 +244,41 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
             prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > MAX_GAP)
                  | (grid >= end)] = np.nan
             profiles.append(prof)
+        if sign > 0 and profiles:
+            profiles += _queue_profiles(S, k, tr, grid, inner, end, traffic_side, w, nl,
+                                        np.array(profiles))
         out.append(_longest(profiles, len(grid)))
     return out[0], out[1]
+
+
+def _queue_profiles(S, k, tr: Tracks, grid, inner: float, end: float, traffic_side: int,
+                    w: float, nl: float, T: np.ndarray) -> list:
+    """Lateral profiles of the queues standing on arm ``k``'s entering side beside its
+    moving parts ``T`` (module doc): a queue's vehicles stand one behind the other on their
+    lane, so the line through them is the lane's course over the queue's stretch, as a
+    trajectory part's rows are. A queue farther than ``ROAD_GAP`` lane widths from every
+    part at every station they share stands on another road."""
+    if len(tr.qxy) == 0:
+        return []
+    on = nearest_arm(S, tr.qxy) == k
+    s, t, c = arm_frame(S, k, tr.qxy[on], tr.qh[on])
+    q = _across(S, k, t, 1.0, traffic_side)
+    ok = (s >= inner) & (c <= -math.cos(math.radians(ALIGN_DEG))) & (q > -w) & (q < (nl + REACH) * w)
+    s, t, qix = s[ok], t[ok], tr.qix[on][ok]
+    out = []
+    for g in np.unique(qix):
+        m = qix == g
+        if m.sum() < 2:
+            continue
+        o = np.argsort(s[m])
+        ss, tt = s[m][o], t[m][o]
+        prof = np.interp(grid, ss, tt)
+        j = np.clip(np.searchsorted(ss, grid), 1, len(ss) - 1)
+        prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > QUEUE_GAP_M[1])
+             | (grid >= end)] = np.nan
+        if np.nanmin(np.abs(T - prof), initial=np.inf) <= ROAD_GAP * w:
+            out.append(prof)
+    return out
 
 
 def _longest(rows: list, m: int) -> np.ndarray:

@@ -39,7 +39,7 @@ from ..model import ENTERING, direction_class, unit_vectors
 from ..observations import Detections
 from .likelihood import ObservationSet
 
-__all__ = ['standing_tracks', 'standing_observations']
+__all__ = ['standing_tracks', 'standing_observations', 'queue_groups']
 
 
 def standing_tracks(dets: Detections, order, starts, ends, still, min_s: float):
@@ -72,11 +72,11 @@ QUEUE_GAP_M = (4.0, 10.0)
 QUEUE_HEADING_DEG = 20.0
 
 
-def _in_queues(xy: np.ndarray, hv: np.ndarray, min_len: int):
-    """The standing vehicles of queues of at least ``min_len`` (module doc): the connected
-    groups of vehicles that stand one behind the other on one line."""
-    if min_len <= 1 or len(xy) == 0:
-        return xy, hv
+def queue_groups(xy: np.ndarray, hv: np.ndarray, min_len: int) -> np.ndarray:
+    """Per standing vehicle its queue (module doc: the connected groups of vehicles that
+    stand one behind the other on one line), -1 in a queue of fewer than ``min_len``."""
+    if len(xy) == 0:
+        return np.zeros(0, np.int64)
     d = xy[None, :, :] - xy[:, None, :]                     # j - i
     along = d[..., 0] * hv[:, None, 0] + d[..., 1] * hv[:, None, 1]
     across = d[..., 0] * -hv[:, None, 1] + d[..., 1] * hv[:, None, 0]
@@ -84,7 +84,14 @@ def _in_queues(xy: np.ndarray, hv: np.ndarray, min_len: int):
     nb = (same & (np.abs(across) < QUEUE_LATERAL_M) & (np.abs(along) >= QUEUE_GAP_M[0])
           & (np.abs(along) <= QUEUE_GAP_M[1]))
     _, group = connected_components(csr_matrix(nb | nb.T), directed=False)
-    keep = np.bincount(group)[group] >= min_len
+    return np.where(np.bincount(group)[group] >= min_len, group, -1).astype(np.int64)
+
+
+def _in_queues(xy: np.ndarray, hv: np.ndarray, min_len: int):
+    """The standing vehicles of queues of at least ``min_len`` (:func:`queue_groups`)."""
+    if min_len <= 1 or len(xy) == 0:
+        return xy, hv
+    keep = queue_groups(xy, hv, min_len) >= 0
     return xy[keep], hv[keep]
 
 

@@ -3,13 +3,17 @@ count from overlapping lateral profiles on a curved road, the profiles of a scen
 and the raised, refitted state that the reported estimate takes."""
 
 from dataclasses import replace
+import math
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
+from intersection_estimator.model import ENTERING
 from intersection_estimator.observations import Detections
-from intersection_estimator.topology import TopologyConfig
+from intersection_estimator.topology import TopologyConfig, TopologyEstimator
+from intersection_estimator.topology.config import Tables
+from intersection_estimator.topology.mcmc import Posterior
 from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, counted,
                                                           entering_rows, fit_counts, lanes_beyond,
                                                           lanes_side_by_side, nearest_arm, occupied,
@@ -17,7 +21,7 @@ from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, co
 from intersection_estimator.topology.state import HDR, NIN, NOUT, STRIDE, WID, pack_state
 from intersection_estimator.topology.support import reported
 
-from .scenes import EASY, scene, tracked_posterior, trajectories
+from .scenes import EASY, _lane_point, scene, tracked_posterior, trajectories
 
 CFG = TopologyConfig(chains_tracked=1)
 W = 3.5
@@ -309,3 +313,49 @@ def test_a_lane_beyond_those_shown_that_no_part_drove_is_left_out():
     assert lp is None and kept[HDR + 3 * STRIDE + NIN] == 3
     S2, lp = fit_counts(post, more.copy(), tr, CFG)
     assert S2[HDR + 3 * STRIDE + NIN] == 2 and lp == pytest.approx(post(S2))
+
+
+def _queue_scene(n_queue: int, beside: float = 0.0):
+    """EASY[0] with arm 1's second entering lane driven by no vehicle but holding a queue
+    of ``n_queue`` vehicles standing 7 m apart through the recording (speed 0, facing the
+    box), the first 18 m from the center; ``beside``: the queue that many metres farther
+    out across the lanes."""
+    gt = EASY[0]
+    rng = np.random.default_rng(7)
+    paths = trajectories(gt, rng, per_lane=2)
+    del paths[4:6]                         # the moving vehicles of arm 1's lane 1
+    parts = [Detections.make(xy + rng.normal(0, 0.2, xy.shape), np.arange(len(xy)) * 0.1,
+                             heading=hd, track_id=tid) for tid, (xy, hd) in enumerate(paths)]
+    arm = gt.arms[1]
+    for i in range(n_queue):
+        p = _lane_point(gt, arm, ENTERING, 1, 18.0 + 7.0 * i) + beside * arm.normal
+        parts.append(Detections.make(p + rng.normal(0, 0.2, (40, 2)), np.arange(40) * 0.1,
+                                     heading=np.full(40, arm.angle + math.pi),
+                                     track_id=500 + i, speed=np.zeros(40)))
+    return gt, Detections.concat(parts)
+
+
+@pytest.mark.parametrize('n_queue,beside,n_map,lanes', [(4, 0.0, 1, 2), (2, 0.0, 1, 1),
+                                                       (4, 2 * W, 2, 1)])
+def test_a_queue_beside_the_driven_lane_shows_its_lane(n_queue, beside, n_map, lanes):
+    """Arm 1's vehicles all drive lane 0; lane 1 holds only a queue. The queue's vehicles
+    stand one behind the other on their lane, so with ``side_by_side_queues`` (3) its line
+    counts as a part of lane 1 beside lane 0's parts, and a state that missed the lane gets
+    it back. Two vehicles (a pair parked at the kerb) are not a queue; a queue 3 lane
+    widths beside the traffic (within the profiles' band of a 2-lane state) stands on
+    another road, and the lane no vehicle drove is left out."""
+    gt, dets = _queue_scene(n_queue, beside)
+    cfg = replace(CFG, side_by_side_queues=3)
+    est = TopologyEstimator(cfg, seed=0)
+    est.set_observations(dets)
+    post = Posterior(Tables(cfg), est.observations)
+    tr = est._window_tracks()
+    assert len(tr.qxy) == (n_queue if n_queue >= 3 else 0)
+    start = pack_state(gt)
+    start[HDR + STRIDE + NIN] = n_map
+    S, _ = fit_counts(post, start.copy(), tr, cfg)
+    assert S[HDR + STRIDE + NIN] == lanes
+    moving_only = tracks_of(dets, (), cfg.min_track_speed)
+    assert len(moving_only.qxy) == 0
+    S, _ = fit_counts(post, start.copy(), moving_only, cfg)
+    assert S[HDR + STRIDE + NIN] == 1
