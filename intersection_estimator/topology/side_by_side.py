@@ -134,7 +134,7 @@ def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0,
     moving = moving_mask(dets, order, starts, min_speed)
     still = (standing_tracks(dets, order, starts, ends, ~moving, queue[0])
              if queue is not None else None)
-    order, starts, ends = order, starts[moving], ends[moving]
+    starts, ends = starts[moving], ends[moving]
     if len(starts) == 0:
         return None
     rows = np.concatenate([order[a:b] for a, b in zip(starts, ends)])
@@ -230,29 +230,38 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
     for sign, nl, part, end in ((1.0, S[i0 + NIN], entering, outer + reach),
                                 (-1.0, S[i0 + NOUT], ~entering, outer)):
         q = _across(S, k, t, sign, traffic_side)
-        rows = np.flatnonzero(base & part & (sign * c < 0) & (q > -w) & (q < (nl + REACH) * w))
+        rows = np.flatnonzero(base & part & (sign * c < 0) & _in_band(q, w, nl))
         profiles = []
         for g in np.split(rows, np.flatnonzero(np.diff(tix[rows])) + 1):
-            if len(g) < 3:
-                continue
-            o = np.argsort(s[g])
-            ss, tt = s[g][o], t[g][o]
-            if ss[-1] - ss[0] < STEP:
-                continue
-            prof = np.interp(grid, ss, tt)
-            j = np.clip(np.searchsorted(ss, grid), 1, len(ss) - 1)
-            prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > MAX_GAP)
-                 | (grid >= end)] = np.nan
-            profiles.append(prof)
+            if len(g) >= 3 and np.ptp(s[g]) >= STEP:
+                profiles.append(_profile(grid, s[g], t[g], MAX_GAP, end))
         if sign > 0 and profiles:
-            profiles += _queue_profiles(S, k, tr, grid, inner, end, traffic_side, w, nl,
+            profiles += _queue_profiles(S, k, tr, grid, inner, end, traffic_side,
                                         np.array(profiles))
         out.append(_longest(profiles, len(grid)))
     return out[0], out[1]
 
 
+def _in_band(q: np.ndarray, w: float, nl: float) -> np.ndarray:
+    """Lateral positions ``q`` (:func:`_across`) within the profiles' band: from one lane
+    width inside the median gap to ``REACH`` lanes beyond the ``nl`` lanes of the direction."""
+    return (q > -w) & (q < (nl + REACH) * w)
+
+
+def _profile(grid: np.ndarray, s: np.ndarray, t: np.ndarray, max_gap: float,
+             end: float) -> np.ndarray:
+    """Lateral offsets ``t`` at stations ``s`` (any order) interpolated onto ``grid``; NaN
+    off their stretch, across gaps wider than ``max_gap`` and from ``end`` on."""
+    o = np.argsort(s)
+    ss, tt = s[o], t[o]
+    prof = np.interp(grid, ss, tt)
+    j = np.clip(np.searchsorted(ss, grid), 1, len(ss) - 1)
+    prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > max_gap) | (grid >= end)] = np.nan
+    return prof
+
+
 def _queue_profiles(S, k, tr: Tracks, grid, inner: float, end: float, traffic_side: int,
-                    w: float, nl: float, T: np.ndarray) -> list:
+                    T: np.ndarray) -> list:
     """Lateral profiles of the queues standing on arm ``k``'s entering side beside its
     moving parts ``T`` (module doc): a queue's vehicles stand one behind the other on their
     lane, so the line through them is the lane's course over the queue's stretch, as a
@@ -260,22 +269,18 @@ def _queue_profiles(S, k, tr: Tracks, grid, inner: float, end: float, traffic_si
     part at every station they share stands on another road."""
     if len(tr.qxy) == 0:
         return []
+    w, nl = S[HDR + k * STRIDE + WID], S[HDR + k * STRIDE + NIN]
     on = nearest_arm(S, tr.qxy) == k
     s, t, c = arm_frame(S, k, tr.qxy[on], tr.qh[on])
-    q = _across(S, k, t, 1.0, traffic_side)
-    ok = (s >= inner) & (c <= -math.cos(math.radians(ALIGN_DEG))) & (q > -w) & (q < (nl + REACH) * w)
+    ok = ((s >= inner) & (c <= -math.cos(math.radians(ALIGN_DEG)))
+          & _in_band(_across(S, k, t, 1.0, traffic_side), w, nl))
     s, t, qix = s[ok], t[ok], tr.qix[on][ok]
     out = []
     for g in np.unique(qix):
         m = qix == g
         if m.sum() < 2:
             continue
-        o = np.argsort(s[m])
-        ss, tt = s[m][o], t[m][o]
-        prof = np.interp(grid, ss, tt)
-        j = np.clip(np.searchsorted(ss, grid), 1, len(ss) - 1)
-        prof[(grid < ss[0]) | (grid > ss[-1]) | (ss[j] - ss[j - 1] > QUEUE_GAP_M[1])
-             | (grid >= end)] = np.nan
+        prof = _profile(grid, s[m], t[m], QUEUE_GAP_M[1], end)
         if np.nanmin(np.abs(T - prof), initial=np.inf) <= ROAD_GAP * w:
             out.append(prof)
     return out
