@@ -80,8 +80,8 @@ from .refit import refit_lane_candidates
 from .standing import QUEUE_GAP_M, queue_groups, standing_tracks
 from .state import ANG, GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID, arm_origin
 
-__all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_frame', 'arm_profiles',
-           'lanes_side_by_side', 'side_by_side', 'lanes_beyond', 'counted', 'fit_counts']
+__all__ = ['Tracks', 'tracks_of', 'nearest_arm', 'entering_rows', 'arm_frame', 'aligned',
+           'arm_profiles', 'lanes_side_by_side', 'side_by_side', 'lanes_beyond', 'counted', 'fit_counts']
 
 #: station step of the lateral profiles [m]
 STEP = 2.0
@@ -148,7 +148,7 @@ def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0,
         return Tracks(xy, h, np.cumsum(new) - 1)
     qxy, qh, _ = still
     ok = np.isfinite(qh[:, 0])
-    qix = queue_groups(qxy[ok], qh[ok], max(queue[1], 2))
+    qix = queue_groups(qxy[ok], qh[ok], queue[1])
     return Tracks(xy, h, np.cumsum(new) - 1, qxy[ok][qix >= 0], qh[ok][qix >= 0], qix[qix >= 0])
 
 
@@ -225,7 +225,7 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
     s, t, c = arm_frame(S, k, tr.xy[mine], tr.h[mine])
     i0 = HDR + k * STRIDE
     w = S[i0 + WID]
-    base = (s >= inner) & (np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))
+    base = (s >= inner) & aligned(c)
     out = []
     for sign, nl, part, end in ((1.0, S[i0 + NIN], entering, outer + reach),
                                 (-1.0, S[i0 + NOUT], ~entering, outer)):
@@ -240,6 +240,12 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
                                         np.array(profiles))
         out.append(_longest(profiles, len(grid)))
     return out[0], out[1]
+
+
+def aligned(c: np.ndarray) -> np.ndarray:
+    """Rows whose heading lies within ``ALIGN_DEG`` of an arm's axis, either way (``c``:
+    the cosine between heading and axis, :func:`arm_frame`)."""
+    return np.abs(c) >= math.cos(math.radians(ALIGN_DEG))
 
 
 def _in_band(q: np.ndarray, w: float, nl: float) -> np.ndarray:
@@ -272,7 +278,7 @@ def _queue_profiles(S, k, tr: Tracks, grid, inner: float, end: float, traffic_si
     w, nl = S[HDR + k * STRIDE + WID], S[HDR + k * STRIDE + NIN]
     on = nearest_arm(S, tr.qxy) == k
     s, t, c = arm_frame(S, k, tr.qxy[on], tr.qh[on])
-    ok = ((s >= inner) & (c <= -math.cos(math.radians(ALIGN_DEG)))
+    ok = ((s >= inner) & aligned(c) & (c < 0)
           & _in_band(_across(S, k, t, 1.0, traffic_side), w, nl))
     s, t, qix = s[ok], t[ok], tr.qix[on][ok]
     out = []

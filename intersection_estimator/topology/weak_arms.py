@@ -24,12 +24,10 @@ Off: ``TopologyConfig.weak_arm_nats = 0``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .mcmc import Posterior
-from .side_by_side import ALIGN_DEG, REACH, Tracks, arm_frame
+from .side_by_side import REACH, Tracks, aligned, arm_frame
 from .state import GAP, HDR, NARMS, NIN, NOUT, STRIDE, WID
 from .unexplained import arm_support, best_new_arm, unexplained_angles
 
@@ -44,8 +42,7 @@ def _on_arm(S: np.ndarray, k: int, tr: Tracks, outside: float):
     i0 = HDR + k * STRIDE
     s, t, c = arm_frame(S, k, tr.xy, tr.h)
     reach = 0.5 * S[i0 + GAP] + (max(S[i0 + NIN], S[i0 + NOUT]) + REACH) * S[i0 + WID]
-    on = ((np.abs(c) >= math.cos(math.radians(ALIGN_DEG)))
-          & (np.abs(t) <= reach) & (s >= outside))
+    on = aligned(c) & (np.abs(t) <= reach) & (s >= outside)
     return on, s, (int(tr.tix[-1]) + 1 if len(tr.tix) else 0)
 
 
