@@ -259,7 +259,7 @@ class TopologyConfig:
     max_lanes: int = 6
     gap_max: float = 4.0
     gap_max_tracked: float = 8.0
-    arm_offset_max: float = 6.0
+    arm_offset_max: float = 10.0
     arm_offset_sigma: float = 1.0
     arm_offset_prior: str = 'laplace'
     arm_bend_max_deg: float = 0.0

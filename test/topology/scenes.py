@@ -122,9 +122,10 @@ EASY = [
 ]
 
 
-def tracked_posterior(cfg, gt: Intersection, seed: int = 3) -> Posterior:
-    """The posterior of ``gt``'s tracked scene (10 clutter tracks) on the observations an
-    estimator with ``cfg`` preprocesses around the truth's center."""
+def tracked_posterior(cfg, gt: Intersection, seed: int = 3, per_lane: int = 2) -> Posterior:
+    """The posterior of ``gt``'s tracked scene (``per_lane`` vehicles a lane, 10 clutter
+    tracks) on the observations an estimator with ``cfg`` preprocesses around the truth's
+    center."""
     est = TopologyEstimator(cfg, seed=0)
-    est.set_observations(scene(gt, 'tracked', seed=seed, clutter=10))
+    est.set_observations(scene(gt, 'tracked', seed=seed, clutter=10, per_lane=per_lane))
     return Posterior(Tables(cfg), est.observations)

@@ -89,3 +89,22 @@ def test_descent_adds_the_missing_arm_and_not_when_off(k):
     off = TopologyConfig(chains_tracked=1, descent_add_support=0.0)
     res_off = descend(S0, off, post, np.random.default_rng(5))
     assert len(unpack_state(res_off.S).arms) == len(gt.arms) - 1
+
+
+@pytest.mark.parametrize('offset', [9.0, -9.0])
+def test_an_arm_nine_metres_beside_the_center_is_reached(offset):
+    """A stem that meets the main road 9 m beside the point where the other arms' axes
+    cross (inD's net 2: its -67 deg road, 9.5 m beside the center the rest of the traffic
+    fixes), four vehicles a lane: the refitted candidate lies on its traffic. With an
+    offset bound of 6 m it cannot, and the grid settles on other lanes at another offset."""
+    gt = copy.deepcopy(EASY[0])
+    k = 1
+    gt.arms[k].offset = offset
+    S = pack_state(_without(gt, k))
+    for cfg, ok in ((CFG, True), (TopologyConfig(chains_tracked=1, arm_offset_max=6.0), False)):
+        post = tracked_posterior(cfg, gt, per_lane=4)
+        S2, _ = with_arm(S, gt.arms[k].angle, post, cfg.lane_width)
+        new = min(unpack_state(S2).arms, key=lambda a: _gap_deg(a.angle, gt.arms[k].angle))
+        on_traffic = abs(new.offset - offset) < 0.5 and \
+            (new.lanes_in, new.lanes_out) == (gt.arms[k].lanes_in, gt.arms[k].lanes_out)
+        assert on_traffic == ok, (cfg.arm_offset_max, new)
