@@ -340,7 +340,7 @@ class TopologyConfig:
     descent_focus: float = 0.8
     descent_top: int = 0
     descent_add_support: float = 1.5
-    radar_tracks_add_support: float = 0.0   # descent_add_support on radar-tracker windows
+    radar_tracks_add_support: float = 3.0   # descent_add_support on radar-tracker windows
     # reported estimate
     side_by_side_overlap: float = 8.0
     side_by_side_cap: int = 2

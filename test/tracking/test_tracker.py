@@ -195,17 +195,20 @@ def test_with_tracked_objects_of_its_own_the_window_keeps_radar_rows_not_radar_t
     assert len(w) == len(dets) + len(objects)
 
 
-def test_a_window_of_radar_tracks_adds_no_arm_for_unexplained_parts():
-    """Descent settings per window: radar-tracker windows use ``radar_tracks_add_support``."""
+def test_a_window_of_radar_tracks_needs_more_passages_for_an_unexplained_arm():
+    """Descent settings per window: radar-tracker windows use ``radar_tracks_add_support``
+    (default 3 passages, twice the tracked objects' 1.5: a radar track that breaks inside
+    the box leaves parts that no arm explains), other windows ``descent_add_support``."""
     from intersection_estimator.topology import TopologyEstimator
     dets, _ = _crossing(np.random.default_rng(8))
     tracks = track_radar(dets)
-    est = TopologyEstimator(TopologyConfig(), 0)
+    cfg = TopologyConfig(radar_tracks_add_support=7.0)
+    est = TopologyEstimator(cfg, 0)
     est.set_observations(tracks)
-    assert est._window_cfg.descent_add_support == TopologyConfig().radar_tracks_add_support == 0
+    assert est._window_cfg.descent_add_support == 7.0
     own = dataclasses.replace(tracks, track_id=tracks.track_id - RADAR_TRACK_ID0)
     est.set_observations(own)
-    assert est._window_cfg.descent_add_support == TopologyConfig().descent_add_support > 0
+    assert est._window_cfg.descent_add_support == cfg.descent_add_support == 1.5
 
 
 def test_rows_without_a_sensor_position_are_tracked_without_the_doppler():
