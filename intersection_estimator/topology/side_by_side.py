@@ -148,8 +148,10 @@ def tracks_of(dets: Detections, skip_labels=(), min_speed: float = 0.0,
         return Tracks(xy, h, np.cumsum(new) - 1)
     qxy, qh, _ = still
     ok = np.isfinite(qh[:, 0])
-    qix = queue_groups(qxy[ok], qh[ok], queue[1])
-    return Tracks(xy, h, np.cumsum(new) - 1, qxy[ok][qix >= 0], qh[ok][qix >= 0], qix[qix >= 0])
+    qxy, qh = qxy[ok], qh[ok]
+    qix = queue_groups(qxy, qh, queue[1])
+    q = qix >= 0
+    return Tracks(xy, h, np.cumsum(new) - 1, qxy[q], qh[q], qix[q])
 
 
 def _path_directions(xy: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -211,14 +213,17 @@ def stations(inner: float, outer: float) -> np.ndarray:
 
 
 def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: float,
-                 traffic_side: int = 1, reach: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                 traffic_side: int = 1, reach: float = 0.0,
+                 arm_of_queue: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Lateral profiles of the trajectory parts on arm ``k`` of ``S``, entering and
     leaving: rows ``t(s)`` on the stations ``inner, inner + STEP, ... < outer + reach``
     (NaN off the part; leaving parts end at ``outer``, module doc) from the part's rows
     (``entering``, :func:`entering_rows`) on the arm (``arm_of_row``, :func:`nearest_arm`)
     heading along the axis within ``ALIGN_DEG`` the part's way, beyond ``inner`` and within
     ``REACH`` lane widths beyond the arm's lanes of that direction (the likelihood's
-    lateral coordinate, :func:`.likelihood._closest_lane`)."""
+    lateral coordinate, :func:`.likelihood._closest_lane`); the entering side also from
+    the queues on the arm (``arm_of_queue``, :func:`nearest_arm` of ``tr.qxy``; None: read
+    here)."""
     grid = stations(inner, outer + reach)
     mine = np.flatnonzero(arm_of_row == k)
     tix, entering = tr.tix[mine], entering[mine]
@@ -235,8 +240,9 @@ def arm_profiles(S, k, tr: Tracks, arm_of_row, entering, inner: float, outer: fl
         for g in np.split(rows, np.flatnonzero(np.diff(tix[rows])) + 1):
             if len(g) >= 3 and np.ptp(s[g]) >= STEP:
                 profiles.append(_profile(grid, s[g], t[g], MAX_GAP, end))
-        if sign > 0 and profiles:
-            profiles += _queue_profiles(S, k, tr, grid, inner, end, traffic_side,
+        if sign > 0 and profiles and len(tr.qxy):
+            on = (nearest_arm(S, tr.qxy) if arm_of_queue is None else arm_of_queue) == k
+            profiles += _queue_profiles(S, k, tr, on, grid, inner, end, traffic_side,
                                         np.array(profiles))
         out.append(_longest(profiles, len(grid)))
     return out[0], out[1]
@@ -266,17 +272,15 @@ def _profile(grid: np.ndarray, s: np.ndarray, t: np.ndarray, max_gap: float,
     return prof
 
 
-def _queue_profiles(S, k, tr: Tracks, grid, inner: float, end: float, traffic_side: int,
+def _queue_profiles(S, k, tr: Tracks, on, grid, inner: float, end: float, traffic_side: int,
                     T: np.ndarray) -> list:
-    """Lateral profiles of the queues standing on arm ``k``'s entering side beside its
-    moving parts ``T`` (module doc): a queue's vehicles stand one behind the other on their
-    lane, so the line through them is the lane's course over the queue's stretch, as a
-    trajectory part's rows are. A queue farther than ``ROAD_GAP`` lane widths from every
-    part at every station they share stands on another road."""
-    if len(tr.qxy) == 0:
-        return []
+    """Lateral profiles of the queues standing on arm ``k``'s entering side (its queue
+    vehicles: mask ``on``) beside its moving parts ``T`` (module doc): a queue's vehicles
+    stand one behind the other on their lane, so the line through them is the lane's course
+    over the queue's stretch, as a trajectory part's rows are. A queue farther than
+    ``ROAD_GAP`` lane widths from every part at every station they share stands on another
+    road."""
     w, nl = S[HDR + k * STRIDE + WID], S[HDR + k * STRIDE + NIN]
-    on = nearest_arm(S, tr.qxy) == k
     s, t, c = arm_frame(S, k, tr.qxy[on], tr.qh[on])
     ok = ((s >= inner) & aligned(c) & (c < 0)
           & _in_band(_across(S, k, t, 1.0, traffic_side), w, nl))
@@ -434,6 +438,7 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
     if tr is None or cfg.side_by_side_overlap <= 0:
         return S, None
     arm_of_row, entering = nearest_arm(S, tr.xy), entering_rows(S, tr)
+    arm_of_queue = nearest_arm(S, tr.qxy)      # center and angles stay: the refits below keep them
     inner = max(cfg.part_outside, STEP)
     outer = cfg.track_radius if math.isfinite(cfg.track_radius) else 150.0
     inside = len(stations(inner, outer))                 # stations within track_radius
@@ -441,7 +446,7 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
     for k in range(int(S[NARMS])):
         i0 = HDR + k * STRIDE
         profiles = arm_profiles(S, k, tr, arm_of_row, entering, inner, outer, cfg.traffic_side,
-                                cfg.side_by_side_reach)
+                                cfg.side_by_side_reach, arm_of_queue)
         now = [int(S[i0 + NIN]), int(S[i0 + NOUT])]
         w = min(S[i0 + WID], cfg.lane_width) if cfg.side_by_side_width else S[i0 + WID]   # module doc
         ov = cfg.side_by_side_overlap
