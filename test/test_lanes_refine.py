@@ -50,3 +50,15 @@ def test_refine_option_runs_after_the_chain():
     est.run(n_samples=500)
     assert 'refine' in est.timings
     assert all(np.isfinite(l.center).all() for l in est.lanelets)
+
+
+def test_refine_init_option_refines_the_start_and_samples_from_it():
+    """``refine_init`` evaluates the posterior before the prior's mean angles were read
+    from the start; they are read before and again after the refinement."""
+    plain, est = _estimator(), _estimator(refine_init=1)
+    assert np.isfinite(est.log_posterior())
+    moved = max(float(np.abs(a.center - b.center).max())
+                for a, b in zip(plain.lanelets, est.lanelets))
+    assert moved > 1e-3                       # the refinement changed the start
+    est.run(n_samples=500)
+    assert all(np.isfinite(l.center).all() for l in est.lanelets)

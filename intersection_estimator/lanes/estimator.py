@@ -208,6 +208,7 @@ class LaneCourseEstimator:
         """Optional LS refinement of the start, prior means, neighbour pairs, caches."""
         g, cfg = self.graph, self.config
         self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
+        self._start_shape()
         if cfg.refine_init:
             self._setup_likelihood()
             if len(self._Q):
@@ -216,18 +217,24 @@ class LaneCourseEstimator:
                     if s.kind == 'connector':
                         _respace(g, i)
                 self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
-        C = g.centers()
-        ang, self._mu = np.zeros(len(C)), np.zeros(len(g.specs))
-        all_angles(C, g.prev_st, g.next_st, g.st_ll, ang, self._mu)
-        self._d2_0 = np.zeros_like(C)
-        h = np.flatnonzero((g.prev_st >= 0) & (g.next_st >= 0))
-        self._d2_0[h] = C[g.prev_st[h]] - 2 * C[h] + C[g.next_st[h]]
+                self._start_shape()
         extra = _connector_pairs(g, cfg.merge_radius)
         if extra:
             g.pair_a = np.concatenate([g.pair_a, [a for a, _ in extra]]).astype(np.int64)
             g.pair_b = np.concatenate([g.pair_b, [b for _, b in extra]]).astype(np.int64)
             g.pair_merged = np.concatenate([g.pair_merged, np.zeros(len(extra), np.bool_)])
         self._setup_likelihood()
+
+    def _start_shape(self) -> None:
+        """The prior's mean angle change per lanelet (paper §III-B) and the start's second
+        differences (``refine_keep_shape``), both read from the current course."""
+        g = self.graph
+        C = g.centers()
+        ang, self._mu = np.zeros(len(C)), np.zeros(len(g.specs))
+        all_angles(C, g.prev_st, g.next_st, g.st_ll, ang, self._mu)
+        self._d2_0 = np.zeros_like(C)
+        h = np.flatnonzero((g.prev_st >= 0) & (g.next_st >= 0))
+        self._d2_0[h] = C[g.prev_st[h]] - 2 * C[h] + C[g.next_st[h]]
 
     def _sequences(self):
         """(points, lanelet indices) per trajectory: its entering, connector, leaving lanelet."""
