@@ -207,7 +207,6 @@ class LaneCourseEstimator:
     def _setup_graph(self) -> None:
         """Optional LS refinement of the start, prior means, neighbour pairs, caches."""
         g, cfg = self.graph, self.config
-        self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
         self._start_shape()
         if cfg.refine_init:
             self._setup_likelihood()
@@ -216,7 +215,6 @@ class LaneCourseEstimator:
                 for i, s in enumerate(g.specs):
                     if s.kind == 'connector':
                         _respace(g, i)
-                self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
                 self._start_shape()
         extra = _connector_pairs(g, cfg.merge_radius)
         if extra:
@@ -226,9 +224,11 @@ class LaneCourseEstimator:
         self._setup_likelihood()
 
     def _start_shape(self) -> None:
-        """The prior's mean angle change per lanelet (paper §III-B) and the start's second
-        differences (``refine_keep_shape``), both read from the current course."""
+        """The start's width per station (the refinement's reference), the prior's mean angle
+        change per lanelet (paper §III-B) and the start's second differences
+        (``refine_keep_shape``), all read from the current course."""
         g = self.graph
+        self._width0 = ((g.P[g.ref[0::2]] - g.P[g.ref[1::2]]) * g.st_normal).sum(1)
         C = g.centers()
         ang, self._mu = np.zeros(len(C)), np.zeros(len(g.specs))
         all_angles(C, g.prev_st, g.next_st, g.st_ll, ang, self._mu)
