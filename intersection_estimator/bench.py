@@ -70,6 +70,11 @@ class BenchOptions:
     cost_model: bool = False   # per case: the sampler's work vs its limit (topology.cost_model)
     family: str = 'table1'
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
+    track_noise_corr: float = 0.0   # tracked: AR(1) track error per cycle (sim/sensors.py)
+
+    def sim_config(self) -> SimConfig:
+        """The sensor and traffic settings the simulated families run with."""
+        return SimConfig(empty_lane_prob=self.empty_lanes, track_noise_corr=self.track_noise_corr)
     radar_tracking: bool = True   # raw: radar rows through the tracker (False: the paper's model)
 
 
@@ -84,13 +89,14 @@ def make_case(opts: BenchOptions, i: int):
     if opts.family == 'table1':
         from .scenarios.base import FamilyScenario
         from .scenarios.floor import scene_traffic_lines
-        sc = simulate_scenario(opts.seed + i, SimConfig(empty_lane_prob=opts.empty_lanes))
+        sc = simulate_scenario(opts.seed + i, opts.sim_config())
         sc = FamilyScenario(**{f: getattr(sc, f) for f in _SCENARIO_FIELDS})
         sc.extra_gt = scene_traffic_lines(sc)         # the floor of the case
     elif opts.family in ('sumo', 'sumo_road'):
         from .scenarios.sumo import sumo_scenario
         from .scenarios.sumo_config import SumoConfig
-        sc = sumo_scenario(opts.seed + i, SumoConfig(road_only=opts.family == 'sumo_road'))
+        sc = sumo_scenario(opts.seed + i, SumoConfig(road_only=opts.family == 'sumo_road'),
+                           opts.sim_config())
     elif opts.family == 'av2':
         from .realdata.av2 import find_scenarios, load_av2
         from .scenarios.sumo_net import realdata_dir
@@ -254,7 +260,7 @@ def run_bench(opts: BenchOptions, estimator=None) -> dict:
     index = _speed_index(meter, cases, summary)
     config = {**asdict(opts), 'estimator': 'oracle (ground truth)' if opts.oracle else
               getattr(estimator, '__module__', 'intersection_estimator.pipeline') + '.estimate',
-              'sim_config': SimConfig(empty_lane_prob=opts.empty_lanes).to_dict(),
+              'sim_config': opts.sim_config().to_dict(),
               'family_config': _family_config(opts.family), 'package_version': package_version(),
               'machine': machine_info(), 'wall_s': time.perf_counter() - t0,
               'timing_note': ('timing_ms measured inside the worker per case (estimator only, '
@@ -425,6 +431,12 @@ def _cmd(args) -> int:
     if not 0.0 <= args.empty_lanes < 1.0:
         print(f'bench: --empty-lanes {args.empty_lanes} not in [0, 1)', file=sys.stderr)
         return 2
+    if not 0.0 <= args.track_noise_corr < 1.0:
+        print(f'bench: --track-noise-corr {args.track_noise_corr} not in [0, 1)', file=sys.stderr)
+        return 2
+    if args.track_noise_corr and args.family not in ('table1', 'sumo', 'sumo_road'):
+        print('bench: --track-noise-corr applies to the simulated families only', file=sys.stderr)
+        return 2
     if args.empty_lanes and args.family != 'table1':
         print('bench: --empty-lanes applies to --family table1 only', file=sys.stderr)
         return 2
@@ -433,7 +445,8 @@ def _cmd(args) -> int:
                         oracle=args.oracle, warmup=not args.no_warmup,
                         profile=getattr(args, 'profile', False) or getattr(args, 'cost_model', False),
                         cost_model=getattr(args, 'cost_model', False), family=args.family,
-                        empty_lanes=args.empty_lanes, radar_tracking=not args.no_radar_tracking)
+                        empty_lanes=args.empty_lanes, radar_tracking=not args.no_radar_tracking,
+                        track_noise_corr=args.track_noise_corr)
     if not opts.oracle:
         try:
             _load_estimator()
@@ -477,6 +490,9 @@ def register(subparsers) -> argparse.ArgumentParser:
                    'av2: the Argoverse 2 scenarios in ../shared/realdata/av2')
     p.add_argument('--empty-lanes', type=float, default=0.0, metavar='P',
                    help='table1: leave each lane without traffic with probability P')
+    p.add_argument('--track-noise-corr', type=float, default=0.0, metavar='RHO',
+                   help="simulated families, tracked: each track's position error AR(1) with "
+                   "this correlation per cycle (a tracker's smoothed output; 0 = white)")
     p.add_argument('--mode', choices=MODES, default='tracked', help='detection input')
     p.add_argument('--samples', type=int, default=5000, help='topology MCMC samples')
     p.add_argument('--lane-samples', type=int, default=20000,

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
+import scipy.sparse as sp
 
 from test_lanes_synth import synth_case
 
 from intersection_estimator.lanes import LaneConfig, LaneCourseEstimator
+from intersection_estimator.lanes.refine import effective_share, lanelet_dof
 
 CASE = synth_case(4, n_arms=3, lanes=(1, 1), per_lane=6, length=40.0)
 
@@ -62,3 +65,58 @@ def test_refine_init_option_refines_the_start_and_samples_from_it():
     assert moved > 1e-3                       # the refinement changed the start
     est.run(n_samples=500)
     assert all(np.isfinite(l.center).all() for l in est.lanelets)
+
+
+def test_lanelet_dof_is_the_trace_of_the_hat_matrix_over_its_rows():
+    """``tr(A_ll^-1 J_l^T J_l)`` equals the dense hat matrix of the fit that moves only the
+    lanelet's variables, its diagonal summed over the lanelet's rows."""
+    rng = np.random.default_rng(3)
+    JQ = sp.random(40, 12, density=0.3, random_state=rng, format='csr')
+    P = sp.random(15, 12, density=0.4, random_state=rng, format='csr')       # penalty rows
+    A = (JQ.T @ JQ + P.T @ P + 1e-3 * sp.identity(12)).tocsc()
+    rows = rng.integers(0, 3, 40)
+    cols = {0: [0, 1, 2, 3, 4], 2: [5, 6, 7, 11]}
+    dof = lanelet_dof(JQ, A, rows, cols)
+    for l, c in cols.items():
+        J = JQ.toarray()[rows == l][:, c]
+        H = J @ np.linalg.solve(A.toarray()[np.ix_(c, c)], J.T)
+        assert dof[l] == pytest.approx(np.trace(H), rel=1e-9)
+    assert set(dof) == {0, 2}
+    # without a penalty every parameter a lanelet's rows alone touch is one degree of freedom
+    J1 = sp.csr_matrix(np.kron(np.eye(2), np.ones((5, 1))))                 # two 5-row blocks
+    assert lanelet_dof(J1, (J1.T @ J1).tocsc(), np.repeat([1, 0], 5), {0: [1], 1: [0]}) == \
+        pytest.approx({0: 1.0, 1: 1.0})
+
+
+def test_effective_share_counts_a_smooth_path_as_one_piece_of_evidence():
+    rng = np.random.default_rng(5)
+    white = rng.normal(0, 1, 4000)
+    smooth = np.zeros(4000)
+    for i in range(1, 4000):                                   # AR(1), rho 0.95
+        smooth[i] = 0.95 * smooth[i - 1] + rng.normal(0, 0.3)
+    one = np.zeros(4000, np.int64)
+    assert effective_share(white, one) == pytest.approx(1.0, abs=0.1)    # rho ~ 0 +- 0.016
+    assert effective_share(smooth, one) == pytest.approx(0.05 / 1.95, abs=0.02)
+    # consecutive points of different lanelets are no pair
+    alternating = np.where(np.arange(4000) % 2 == 0, 1.0, -1.0)
+    assert effective_share(alternating, np.arange(4000)) == 1.0
+    assert effective_share(alternating, one) == 1.0             # negative rho is clipped
+
+
+def test_refine_select_keeps_only_connectors_the_traffic_supports():
+    """With a penalty no drop can beat every connector keeps its start shape, carried to the
+    refined ends; without one the refinement's shape stays, as with ``refine_select`` 0."""
+    plain = _estimator(refine_init=1)
+    free = _estimator(refine_init=1, refine_select=1e-9)
+    stiff = _estimator(refine_init=1, refine_select=1000.0)
+    start = _estimator()
+    conns = [i for i, l in enumerate(plain.lanelets) if l.kind == 'connector']
+    for i in conns:
+        np.testing.assert_allclose(free.lanelets[i].center, plain.lanelets[i].center, atol=1e-9)
+    # the stiff connectors differ from the refined ones and keep the start's bend
+    assert max(float(np.abs(stiff.lanelets[i].center - plain.lanelets[i].center).max())
+               for i in conns) > 1e-3
+    for i in conns:
+        s, a = stiff.lanelets[i].center, start.lanelets[i].center
+        bend = lambda c: np.diff(np.unwrap(np.arctan2(*np.diff(c, axis=0).T[::-1])))
+        assert np.abs(bend(s).sum() - bend(a).sum()) < 0.1

@@ -179,6 +179,30 @@ def test_tracked_detections():
     assert np.all(np.linalg.norm(d.xy - d.sensor_xy, axis=1) <= sc.sensor_range)  # >= 100 m
 
 
+def _track_errors(sc, d):
+    """Per real track of the tracked detections: its position errors in cycle order."""
+    truth = {(tr.id, round(t * 10)): xy for tr in sc.tracks for t, xy in zip(tr.t, tr.xy)}
+    out = []
+    for tid in np.unique(d.track_id[d.track_id < FALSE_TRACK_ID0]):
+        i = np.flatnonzero(d.track_id == tid)
+        out.append(np.array([d.xy[k] - truth[(tid, round(d.t[k] * 10))] for k in i]))
+    return out
+
+
+def test_tracked_noise_correlated_along_a_track_option():
+    """``track_noise_corr``: the same sigma per row, AR(1) along each track (a tracker's
+    output); 0 leaves the white draws -- and every other row -- as they were."""
+    white, corr = (simulate_scenario(5, SimConfig(track_noise_corr=r)) for r in (0.0, 0.95))
+    dw, dc = white.detections('tracked'), corr.detections('tracked')
+    assert abs(len(dw) - len(dc)) < 0.01 * len(dw)      # the range cut is on noisy positions
+    ew, ec = _track_errors(white, dw), _track_errors(corr, dc)
+    lag1 = lambda es: (sum(float(np.sum(e[1:] * e[:-1])) for e in es)
+                       / sum(float(np.sum(e[:-1] ** 2)) for e in es))
+    assert abs(lag1(ew)) < 0.05 and lag1(ec) == pytest.approx(0.95, abs=0.03)
+    assert np.concatenate(ec).std() == pytest.approx(1.0, abs=0.15)
+    assert simulate_scenario(5).detections('tracked').xy.tobytes() == dw.xy.tobytes()
+
+
 def test_raw_radar_doppler_sign_and_clutter():
     sc = simulate_scenario(6)
     d = sc.detections('raw')

@@ -114,6 +114,8 @@ _RANGES = {
     'keep_best': ('[0, 1]', '1: end each run in the best state seen (MAP), 0: in the final state'),
     'refine': ('[0, 1]', 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
     'refine_init': ('[0, 1]', 'penalised least-squares refinement of the initialisation'),
+    'refine_select': ('[0.0, 1000.0]', 'refine_init: a connector keeps its refined shape only when '
+                      'better by this per effective parameter (0: always)'),
     'refine_smooth': ('[0.0, 1e6]', 'weight of the second-difference penalty of the refinement'),
     'refine_smooth_connector': ('[0.0, 1e6]', 'second-difference weight inside connectors'),
     'refine_keep_shape': ('[0, 1]', '1: penalise second differences relative to the initial shape'),
@@ -210,6 +212,7 @@ class LaneConfig:
     keep_best: int = 1
     refine: int = 0
     refine_init: int = 0
+    refine_select: float = 0.0       # docs/real_junctions.md, "Stop 54"
     refine_smooth: float = 1e4
     refine_smooth_connector: float = 300.0
     refine_keep_shape: int = 1

@@ -24,7 +24,8 @@ from . import mcmc as M
 from .mcmc import run_chain
 from .model import LaneGraph, build_graph
 from .prior import all_angles, angle_csr, log_prior
-from .refine import refine_offsets
+from .refine import effective_share, nearest_in_window, refine_offsets
+from .spline import aic_prefers
 from .halts import halt_positions, halt_stops
 from .stops import complete_partial, fit_stops
 
@@ -42,6 +43,17 @@ def lanelets_from_topology(topology: Intersection, length: float = 60.0,
 def _topology_key(t: Intersection):
     """The topology at the warm start's resolution (0.25 m, 0.5 deg)."""
     return topology_key(t, 0.25, 0.5, gap_m=0.25, width_m=0.25)
+
+
+def _carry_shape(graph: LaneGraph, lane: int, P0: np.ndarray) -> None:
+    """The connector's shape in ``P0`` (its start) carried to its current ends: each border's
+    inner points move by the blend of its two ends' moves, linear in the station index."""
+    o, m = graph.st_off[lane], graph.st_n[lane]
+    f = np.linspace(0.0, 1.0, m)[1:-1, None]
+    for side in (0, 1):
+        refs = graph.ref[2 * np.arange(o, o + m) + side]
+        d0, d1 = graph.P[refs[0]] - P0[refs[0]], graph.P[refs[-1]] - P0[refs[-1]]
+        graph.P[refs[1:-1]] = P0[refs[1:-1]] + (1 - f) * d0 + f * d1
 
 
 def _respace(graph: LaneGraph, lane: int) -> None:
@@ -211,10 +223,7 @@ class LaneCourseEstimator:
         if cfg.refine_init:
             self._setup_likelihood()
             if len(self._Q):
-                self._refine(assign=True)
-                for i, s in enumerate(g.specs):
-                    if s.kind == 'connector':
-                        _respace(g, i)
+                self._refine_start()
                 self._start_shape()
         extra = _connector_pairs(g, cfg.merge_radius)
         if extra:
@@ -222,6 +231,42 @@ class LaneCourseEstimator:
             g.pair_b = np.concatenate([g.pair_b, [b for _, b in extra]]).astype(np.int64)
             g.pair_merged = np.concatenate([g.pair_merged, np.zeros(len(extra), np.bool_)])
         self._setup_likelihood()
+
+    def _refine_start(self) -> None:
+        """The start refined by penalised least squares (``refine_init``, beyond the paper).
+        With ``refine_select``, a connector keeps its refined shape only where it explains its
+        points better than the start by more than ``refine_select`` per effective parameter of
+        the refinement on them (:func:`.refine.lanelet_dof`), in Akaike's form with the points
+        that count as independent (:func:`.refine.effective_share`); elsewhere the start's
+        shape is carried to the refined ends."""
+        g, cfg = self.graph, self.config
+        conns = [i for i, s in enumerate(g.specs) if s.kind == 'connector']
+        if not cfg.refine_select:
+            self._refine(assign=True)
+        else:
+            P0, (r0, l0) = g.P.copy(), self._residuals()
+            share = effective_share(r0, l0)
+            dof = self._refine(assign=True, dof_of=conns)
+            r1, l1 = self._residuals()
+            n = len(g.specs)
+            rss0, rss1 = np.bincount(l0, r0 * r0, n), np.bincount(l1, r1 * r1, n)
+            m = np.maximum(np.bincount(l0, minlength=n), np.bincount(l1, minlength=n))
+            for i in conns:
+                if not aic_prefers(share * m[i], rss0[i], rss1[i], dof[i], cfg.refine_select):
+                    _carry_shape(g, i, P0)
+        for i in conns:
+            _respace(g, i)
+
+    def _residuals(self):
+        """Signed distance of every assigned point to the current center line (clipped at
+        ``refine_huber``, in the points' order) and its lanelet."""
+        g = self.graph
+        self._assign()
+        C = g.centers()
+        k, t, nrm = nearest_in_window(C, self._Q, self._lo, self._hi)
+        proj = (1 - t)[:, None] * C[k] + t[:, None] * C[k + 1]
+        h = self.config.refine_huber
+        return np.clip(((self._Q - proj) * nrm).sum(1), -h, h), g.st_ll[k]
 
     def _start_shape(self) -> None:
         """The start's width per station (the refinement's reference), the prior's mean angle
@@ -292,15 +337,15 @@ class LaneCourseEstimator:
         """Log posterior (up to a constant) of the current state, recomputed from scratch."""
         return self._recompute() if self.graph is not None else 0.0
 
-    def _refine(self, assign: bool = False) -> None:
+    def _refine(self, assign: bool = False, dof_of=()) -> dict:
         cfg = self.config
-        refine_offsets(self.graph, self._Q, self._lo, self._hi, self._width0,
+        return refine_offsets(self.graph, self._Q, self._lo, self._hi, self._width0,
                        sigma=cfg.sigma_perp, smooth=cfg.refine_smooth,
                        smooth_connector=cfg.refine_smooth_connector, jerk=cfg.refine_jerk,
                        width=cfg.refine_width,
                        iters=cfg.refine_iters, huber=cfg.refine_huber,
                        assign=self._assign if assign else None,
-                       d2_ref=self._d2_0 if cfg.refine_keep_shape else None)
+                       d2_ref=self._d2_0 if cfg.refine_keep_shape else None, dof_of=dof_of)
 
     # ------------------------------------------------------------------ sampling
     def _params(self) -> np.ndarray:

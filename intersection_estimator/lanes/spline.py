@@ -75,7 +75,7 @@ def second_differences(n: int) -> np.ndarray:
     return D
 
 
-def aic_prefers(m: int, rss_start: float, rss_fit: float, n_params: float,
+def aic_prefers(m: float, rss_start: float, rss_fit: float, n_params: float,
                 penalty: float) -> bool:
     """The selection rule of :func:`prefer_fit`: ``m log(RSS_start / RSS_fit) > penalty *
     n_params`` (``penalty = 2``: Akaike's criterion for Gaussian residuals; 0: always)."""

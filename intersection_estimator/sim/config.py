@@ -75,6 +75,9 @@ class SimConfig:
     sensor_range: float = 100.0                     # around the ego sensor [m], at least
     auto_sensor_range: bool = True                  # raise it per scene to see every arm
     position_noise: float = 1.0                     # N(0, sigma) on every detection [m]
+    # 'tracked': the position error of a track as AR(1) over its cycles, this correlation per
+    # cycle at the same sigma (a tracker's smoothed output; 0 = white, the paper's §IV model)
+    track_noise_corr: float = 0.0
     heading_noise_deg: float = 5.0                  # tracked / heading detections
     speed_noise: float = 0.3                        # tracked speed [m/s]
     clutter_radius: float = 80.0                    # false detections around the center [m]

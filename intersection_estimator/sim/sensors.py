@@ -4,7 +4,8 @@ Every sensor runs at ``rate_hz`` on the ego vehicle and sees vehicles within
 ``sensor_range`` of the sensor (360 deg, no occlusion; per scene raised by
 :func:`scene_sensor_range` so that every arm is seen near the stop line). Modes:
 
-* ``'tracked'`` -- one row per vehicle and cycle: position + N(0, position_noise),
+* ``'tracked'`` -- one row per vehicle and cycle: position + N(0, position_noise) (white,
+  or with ``track_noise_corr`` an AR(1) error along each track, as a tracker's output),
   heading, speed, persistent ``track_id`` (= the vehicle's index), label CAR. False
   detections are short-lived false *tracks*: static points uniform within
   ``clutter_radius`` of the center, random heading, lifetime ``false_track_cycles``
@@ -24,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.signal import lfilter
 
 from ..model import wrap_angle
 from ..observations import Detections
@@ -86,11 +88,30 @@ def _visible(xy, cyc, sensor_xy, rng_m):
     return np.linalg.norm(xy - sensor_xy[cyc], axis=1) <= rng_m
 
 
+def track_error(white: np.ndarray, vid: np.ndarray, cyc: np.ndarray, rho: float) -> np.ndarray:
+    """The white draws ``white`` (N(0, sigma) per row) turned into an AR(1) error along each
+    vehicle's rows in cycle order, ``e_k = rho e_(k-1) + sqrt(1 - rho^2) w_k``, ``e_0 = w_0``:
+    the same sigma per row, correlation ``rho^lag`` between rows of one track (``rho = 0``:
+    ``white`` itself)."""
+    if rho <= 0.0 or len(white) == 0:
+        return white
+    order = np.lexsort((cyc, vid))
+    w = white[order].copy()
+    gain = math.sqrt(1.0 - rho * rho)
+    cuts = np.flatnonzero(np.r_[True, vid[order][1:] != vid[order][:-1], True])
+    w[cuts[:-1]] /= gain                         # e_0 = w_0: the stationary start
+    out = np.empty_like(white)
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        out[order[a:b]] = lfilter([gain], [1.0, -rho], w[a:b], axis=0)
+    return out
+
+
 def _tracked(rng, truth, sens, center, cfg, n_cyc):  # noqa: ARG001 - common signature
     cyc, vid, xy, yaw, sp = truth
     hn = math.radians(cfg.heading_noise_deg)
     n = len(cyc)
-    det = dict(cyc=cyc, xy=xy + rng.normal(0, cfg.position_noise, (n, 2)),
+    err = track_error(rng.normal(0, cfg.position_noise, (n, 2)), vid, cyc, cfg.track_noise_corr)
+    det = dict(cyc=cyc, xy=xy + err,
                heading=wrap_angle(yaw + rng.normal(0, hn, n)),
                speed=np.maximum(sp + rng.normal(0, cfg.speed_noise, n), 0.0),
                track_id=vid, label=np.full(n, CAR))
