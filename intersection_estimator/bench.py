@@ -71,10 +71,12 @@ class BenchOptions:
     family: str = 'table1'
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
     track_noise_corr: float = 0.0   # tracked: AR(1) track error per cycle (sim/sensors.py)
+    position_noise: float = 1.0     # simulated families: sigma of every detection's position [m]
 
     def sim_config(self) -> SimConfig:
         """The sensor and traffic settings the simulated families run with."""
-        return SimConfig(empty_lane_prob=self.empty_lanes, track_noise_corr=self.track_noise_corr)
+        return SimConfig(empty_lane_prob=self.empty_lanes, track_noise_corr=self.track_noise_corr,
+                         position_noise=self.position_noise)
     radar_tracking: bool = True   # raw: radar rows through the tracker (False: the paper's model)
 
 
@@ -434,8 +436,13 @@ def _cmd(args) -> int:
     if not 0.0 <= args.track_noise_corr < 1.0:
         print(f'bench: --track-noise-corr {args.track_noise_corr} not in [0, 1)', file=sys.stderr)
         return 2
-    if args.track_noise_corr and args.family not in ('table1', 'sumo', 'sumo_road'):
-        print('bench: --track-noise-corr applies to the simulated families only', file=sys.stderr)
+    if not args.position_noise > 0.0:
+        print(f'bench: --position-noise {args.position_noise} must be > 0', file=sys.stderr)
+        return 2
+    if (args.track_noise_corr or args.position_noise != 1.0) and \
+            args.family not in ('table1', 'sumo', 'sumo_road'):
+        print('bench: --track-noise-corr / --position-noise apply to the simulated families only',
+              file=sys.stderr)
         return 2
     if args.empty_lanes and args.family != 'table1':
         print('bench: --empty-lanes applies to --family table1 only', file=sys.stderr)
@@ -446,7 +453,7 @@ def _cmd(args) -> int:
                         profile=getattr(args, 'profile', False) or getattr(args, 'cost_model', False),
                         cost_model=getattr(args, 'cost_model', False), family=args.family,
                         empty_lanes=args.empty_lanes, radar_tracking=not args.no_radar_tracking,
-                        track_noise_corr=args.track_noise_corr)
+                        track_noise_corr=args.track_noise_corr, position_noise=args.position_noise)
     if not opts.oracle:
         try:
             _load_estimator()
@@ -493,6 +500,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--track-noise-corr', type=float, default=0.0, metavar='RHO',
                    help="simulated families, tracked: each track's position error AR(1) with "
                    "this correlation per cycle (a tracker's smoothed output; 0 = white)")
+    p.add_argument('--position-noise', type=float, default=1.0, metavar='SIGMA',
+                   help='simulated families: sigma of every detected position [m] (1.0: the '
+                   "paper's §IV model)")
     p.add_argument('--mode', choices=MODES, default='tracked', help='detection input')
     p.add_argument('--samples', type=int, default=5000, help='topology MCMC samples')
     p.add_argument('--lane-samples', type=int, default=20000,

@@ -153,3 +153,25 @@ def test_no_radar_tracking_hands_the_estimator_the_paper_model(monkeypatch):
     on = run_bench(BenchOptions(n=1, mode='raw', seed=3, warmup=False), estimator=est)
     assert seen[-1] is None and 'radar_tracking=on' in format_table(on)
     assert main(['bench', '--n', '1', '--oracle', '--mode', 'raw', '--no-radar-tracking']) == 0
+
+
+def test_noise_options_reach_the_simulated_cases_and_bad_values_are_refused(tmp_path, capsys):
+    """``--track-noise-corr`` / ``--position-noise``: the cases are simulated with them (the
+    JSON's sim_config says so, the detections differ); values outside their range and the
+    AV2 family (recorded, nothing simulated) exit 2 naming the option."""
+    out = tmp_path / 'bench.json'
+    assert _cli(['bench', '--n', '1', '--oracle', '--seed', '5', '--track-noise-corr', '0.9',
+                 '--position-noise', '0.3', '--json', str(out)]) == 0
+    cfg = json.loads(out.read_text())['config']['sim_config']
+    assert cfg['track_noise_corr'] == 0.9 and cfg['position_noise'] == 0.3
+    opts = BenchOptions(n=1, seed=5, track_noise_corr=0.9, position_noise=0.3)
+    sc, _ = bench.make_case(opts, 0)
+    plain, _ = bench.make_case(BenchOptions(n=1, seed=5), 0)
+    assert sc.config.track_noise_corr == 0.9
+    assert not np.array_equal(sc.detections('tracked').xy[:50], plain.detections('tracked').xy[:50])
+    capsys.readouterr()
+    for argv, name in ((['--track-noise-corr', '1.0'], '--track-noise-corr'),
+                       (['--position-noise', '0'], '--position-noise'),
+                       (['--family', 'av2', '--track-noise-corr', '0.5'], '--track-noise-corr')):
+        assert _cli(['bench', '--n', '1', '--oracle', *argv]) == 2
+        assert name in capsys.readouterr().err
