@@ -72,12 +72,12 @@ class BenchOptions:
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
     track_noise_corr: float = 0.0   # tracked: AR(1) track error per cycle (sim/sensors.py)
     position_noise: float = 1.0     # simulated families: sigma of every detection's position [m]
+    radar_tracking: bool = True   # raw: radar rows through the tracker (False: the paper's model)
 
     def sim_config(self) -> SimConfig:
         """The sensor and traffic settings the simulated families run with."""
         return SimConfig(empty_lane_prob=self.empty_lanes, track_noise_corr=self.track_noise_corr,
                          position_noise=self.position_noise)
-    radar_tracking: bool = True   # raw: radar rows through the tracker (False: the paper's model)
 
 
 FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')

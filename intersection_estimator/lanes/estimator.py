@@ -340,12 +340,12 @@ class LaneCourseEstimator:
     def _refine(self, assign: bool = False, dof_of=()) -> dict:
         cfg = self.config
         return refine_offsets(self.graph, self._Q, self._lo, self._hi, self._width0,
-                       sigma=cfg.sigma_perp, smooth=cfg.refine_smooth,
-                       smooth_connector=cfg.refine_smooth_connector, jerk=cfg.refine_jerk,
-                       width=cfg.refine_width,
-                       iters=cfg.refine_iters, huber=cfg.refine_huber,
-                       assign=self._assign if assign else None,
-                       d2_ref=self._d2_0 if cfg.refine_keep_shape else None, dof_of=dof_of)
+                              sigma=cfg.sigma_perp, smooth=cfg.refine_smooth,
+                              smooth_connector=cfg.refine_smooth_connector, jerk=cfg.refine_jerk,
+                              width=cfg.refine_width, iters=cfg.refine_iters,
+                              huber=cfg.refine_huber, assign=self._assign if assign else None,
+                              d2_ref=self._d2_0 if cfg.refine_keep_shape else None,
+                              dof_of=dof_of)
 
     # ------------------------------------------------------------------ sampling
     def _params(self) -> np.ndarray:

@@ -21,7 +21,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-
 __all__ = ['effective_share', 'lanelet_dof', 'nearest_in_window', 'refine_offsets']
 
 
