@@ -61,11 +61,14 @@ def main(argv=None) -> int:
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--mode', default='tracked')
     ap.add_argument('--lane-samples', type=int, default=20000)
+    ap.add_argument('--track-noise-corr', type=float, default=0.0, help='as bench (simulated families)')
+    ap.add_argument('--position-noise', type=float, default=1.0, help='as bench (simulated families)')
     ap.add_argument('--variant', action='append', default=[])
     ap.add_argument('--json')
     a = ap.parse_args(argv)
     variants = [variant(v) for v in (a.variant or ['base:'])]
-    opts = BenchOptions(n=a.n, seed=a.seed, mode=a.mode, family=a.family, lane_samples=a.lane_samples)
+    opts = BenchOptions(n=a.n, seed=a.seed, mode=a.mode, family=a.family, lane_samples=a.lane_samples,
+                        track_noise_corr=a.track_noise_corr, position_noise=a.position_noise)
     per = {name: [] for name, _ in variants}
     for i in range(a.n):
         try:
