@@ -159,6 +159,16 @@ def test_deterministic_per_seed():
     assert simulate_scenario(43).gt.to_json() != a.gt.to_json()
 
 
+def _track_errors(sc, d):
+    """Per real track of the tracked detections: its position errors in cycle order."""
+    truth = {(tr.id, round(t * 10)): xy for tr in sc.tracks for t, xy in zip(tr.t, tr.xy)}
+    out = []
+    for tid in np.unique(d.track_id[d.track_id < FALSE_TRACK_ID0]):
+        i = np.flatnonzero(d.track_id == tid)
+        out.append(np.array([d.xy[k] - truth[(tid, round(d.t[k] * 10))] for k in i]))
+    return out
+
+
 def test_tracked_detections():
     sc = simulate_scenario(5)
     d = sc.detections('tracked')
@@ -171,22 +181,10 @@ def test_tracked_detections():
     for tid in np.unique(d.track_id)[:10]:
         assert np.all(np.diff(d.t[d.track_id == tid]) > 0)
     # noise N(0, 1 m) around the true positions
-    truth = {(tr.id, round(t * 10)): xy for tr in sc.tracks for t, xy in zip(tr.t, tr.xy)}
-    err = np.array([d.xy[i] - truth[(d.track_id[i], round(d.t[i] * 10))]
-                    for i in np.flatnonzero(real)])
+    err = np.concatenate(_track_errors(sc, d))
     assert abs(err.std() - 1.0) < 0.1 and np.abs(err.mean(axis=0)).max() < 0.1
     assert np.linalg.norm(d.xy[~real] - sc.gt.center, axis=1).max() < 80 + 5
     assert np.all(np.linalg.norm(d.xy - d.sensor_xy, axis=1) <= sc.sensor_range)  # >= 100 m
-
-
-def _track_errors(sc, d):
-    """Per real track of the tracked detections: its position errors in cycle order."""
-    truth = {(tr.id, round(t * 10)): xy for tr in sc.tracks for t, xy in zip(tr.t, tr.xy)}
-    out = []
-    for tid in np.unique(d.track_id[d.track_id < FALSE_TRACK_ID0]):
-        i = np.flatnonzero(d.track_id == tid)
-        out.append(np.array([d.xy[k] - truth[(tid, round(d.t[k] * 10))] for k in i]))
-    return out
 
 
 def test_tracked_noise_correlated_along_a_track_option():

@@ -24,7 +24,7 @@ from . import mcmc as M
 from .mcmc import run_chain
 from .model import LaneGraph, build_graph
 from .prior import all_angles, angle_csr, log_prior
-from .refine import effective_share, nearest_in_window, refine_offsets
+from .refine import effective_share, refine_offsets, signed_offsets
 from .spline import aic_prefers
 from .halts import halt_positions, halt_stops
 from .stops import complete_partial, fit_stops
@@ -259,14 +259,12 @@ class LaneCourseEstimator:
 
     def _residuals(self):
         """Signed distance of every assigned point to the current center line (clipped at
-        ``refine_huber``, in the points' order) and its lanelet."""
-        g = self.graph
-        self._assign()
-        C = g.centers()
-        k, t, nrm = nearest_in_window(C, self._Q, self._lo, self._hi)
-        proj = (1 - t)[:, None] * C[k] + t[:, None] * C[k + 1]
+        ``refine_huber``, in the points' order) and its lanelet. The assignment is the
+        current one: ``_setup_likelihood`` made it before the refinement, which makes it
+        again after each of its steps."""
+        k, _, _, r = signed_offsets(self.graph.centers(), self._Q, self._lo, self._hi)
         h = self.config.refine_huber
-        return np.clip(((self._Q - proj) * nrm).sum(1), -h, h), g.st_ll[k]
+        return np.clip(r, -h, h), self.graph.st_ll[k]
 
     def _start_shape(self) -> None:
         """The start's width per station (the refinement's reference), the prior's mean angle

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-__all__ = ['effective_share', 'lanelet_dof', 'nearest_in_window', 'refine_offsets']
+__all__ = ['effective_share', 'lanelet_dof', 'nearest_in_window', 'refine_offsets', 'signed_offsets']
 
 
 def _inner(graph, lane):
@@ -51,6 +51,14 @@ def nearest_in_window(C, Q, lo, hi):
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     nrm = np.stack([-d[:, 1], d[:, 0]], axis=1)
     return bg, bt, nrm
+
+
+def signed_offsets(C, Q, lo, hi):
+    """Each point's nearest segment ``g`` of the center line ``C`` (within its window), the
+    foot's parameter ``t``, the segment's unit normal and the point's signed distance along it."""
+    g, t, nrm = nearest_in_window(C, Q, lo, hi)
+    proj = (1 - t)[:, None] * C[g] + t[:, None] * C[g + 1]
+    return g, t, nrm, ((Q - proj) * nrm).sum(1)
 
 
 def _rows(n_rows, slots_per_row, coefs, ref, axis, vec, var):
@@ -147,9 +155,7 @@ def refine_offsets(graph, Q, lo, hi, width0, *, sigma=1.0, smooth=20.0, smooth_c
         C = graph.centers()
         blocks, rhs = [], []
         if len(Q):
-            g, t, nrm = nearest_in_window(C, Q, lo, hi)
-            proj = (1 - t)[:, None] * C[g] + t[:, None] * C[g + 1]
-            r = ((Q - proj) * nrm).sum(1)
+            g, t, nrm, r = signed_offsets(C, Q, lo, hi)
             w = np.where(np.abs(r) <= huber, 1.0, huber / np.maximum(np.abs(r), 1e-12))
             sw = np.sqrt(w) / sigma
             rr, cc, vv = _rows(len(Q), [2 * g, 2 * g + 1, 2 * g + 2, 2 * g + 3],
