@@ -72,15 +72,17 @@ class BenchOptions:
     empty_lanes: float = 0.0   # table1: share of lanes left without traffic
     track_noise_corr: float = 0.0   # tracked: AR(1) track error per cycle (sim/sensors.py)
     position_noise: float = 1.0     # simulated families: sigma of every detection's position [m]
+    turn_shape: str = 'arc'         # table1: connector family of the simulator (SimConfig)
     radar_tracking: bool = True   # raw: radar rows through the tracker (False: the paper's model)
 
     def sim_config(self) -> SimConfig:
         """The sensor and traffic settings the simulated families run with."""
         return SimConfig(empty_lane_prob=self.empty_lanes, track_noise_corr=self.track_noise_corr,
-                         position_noise=self.position_noise)
+                         position_noise=self.position_noise, turn_shape=self.turn_shape)
 
 
 FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')
+TURN_SHAPES = ('arc', 'corner')
 _SCENARIO_FIELDS = ('seed', 'config', 'gt', 'gt_lanelets', 'traffic', 'tracks', 'ego', 'duration',
                     'stop', 'sensor_range', 'sensors')
 
@@ -378,6 +380,7 @@ def format_table(result: dict) -> str:
     ]
     radar = ('' if cfg['mode'] != 'raw' else
              '  radar_tracking=' + ('on' if cfg.get('radar_tracking', True) else 'off (paper model)'))
+    radar += '' if cfg.get('turn_shape', 'arc') == 'arc' else f"  turn_shape={cfg['turn_shape']}"
     head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}{radar}  n={cfg['n']}  "
             f"seed={cfg['seed']}  jobs={cfg['jobs']}  "
             f"estimator={cfg['estimator']}")
@@ -447,13 +450,18 @@ def _cmd(args) -> int:
     if args.empty_lanes and args.family != 'table1':
         print('bench: --empty-lanes applies to --family table1 only', file=sys.stderr)
         return 2
+    if args.turn_shape != 'arc' and args.family != 'table1':
+        print('bench: --turn-shape applies to --family table1 only (SUMO draws its own turns)',
+              file=sys.stderr)
+        return 2
     opts = BenchOptions(n=args.n, mode=args.mode, samples=args.samples,
                         lane_samples=args.lane_samples, seed=args.seed, jobs=args.jobs,
                         oracle=args.oracle, warmup=not args.no_warmup,
                         profile=getattr(args, 'profile', False) or getattr(args, 'cost_model', False),
                         cost_model=getattr(args, 'cost_model', False), family=args.family,
                         empty_lanes=args.empty_lanes, radar_tracking=not args.no_radar_tracking,
-                        track_noise_corr=args.track_noise_corr, position_noise=args.position_noise)
+                        track_noise_corr=args.track_noise_corr, position_noise=args.position_noise,
+                        turn_shape=args.turn_shape)
     if not opts.oracle:
         try:
             _load_estimator()
@@ -503,6 +511,10 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument('--position-noise', type=float, default=1.0, metavar='SIGMA',
                    help='simulated families: sigma of every detected position [m] (1.0: the '
                    "paper's §IV model)")
+    p.add_argument('--turn-shape', choices=TURN_SHAPES, default='arc',
+                   help="table1: the simulator's connectors -- arc: circular-arc Beziers, the "
+                   "family the estimator's connectors start from; corner: Beziers through the "
+                   "corner of the lanes' lines, a family the estimator does not share")
     p.add_argument('--mode', choices=MODES, default='tracked', help='detection input')
     p.add_argument('--samples', type=int, default=5000, help='topology MCMC samples')
     p.add_argument('--lane-samples', type=int, default=20000,

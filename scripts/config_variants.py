@@ -18,7 +18,7 @@ from functools import partial
 import json
 import sys
 
-from intersection_estimator.bench import BenchOptions, FAMILIES, _run_estimator, make_case
+from intersection_estimator.bench import BenchOptions, FAMILIES, TURN_SHAPES, _run_estimator, make_case
 from intersection_estimator.evaluate import aggregate, evaluate
 from intersection_estimator.lanes import LaneConfig
 from intersection_estimator.pipeline import estimate
@@ -63,12 +63,14 @@ def main(argv=None) -> int:
     ap.add_argument('--lane-samples', type=int, default=20000)
     ap.add_argument('--track-noise-corr', type=float, default=0.0, help='as bench (simulated families)')
     ap.add_argument('--position-noise', type=float, default=1.0, help='as bench (simulated families)')
+    ap.add_argument('--turn-shape', choices=TURN_SHAPES, default='arc', help='as bench (table1)')
     ap.add_argument('--variant', action='append', default=[])
     ap.add_argument('--json')
     a = ap.parse_args(argv)
     variants = [variant(v) for v in (a.variant or ['base:'])]
     opts = BenchOptions(n=a.n, seed=a.seed, mode=a.mode, family=a.family, lane_samples=a.lane_samples,
-                        track_noise_corr=a.track_noise_corr, position_noise=a.position_noise)
+                        track_noise_corr=a.track_noise_corr, position_noise=a.position_noise,
+                        turn_shape=a.turn_shape)
     per = {name: [] for name, _ in variants}
     for i in range(a.n):
         try:

@@ -169,9 +169,11 @@ def test_noise_options_reach_the_simulated_cases_and_bad_values_are_refused(tmp_
     plain, _ = bench.make_case(BenchOptions(n=1, seed=5), 0)
     assert sc.config.track_noise_corr == 0.9
     assert not np.array_equal(sc.detections('tracked').xy[:50], plain.detections('tracked').xy[:50])
+    assert BenchOptions(turn_shape='corner').sim_config().turn_shape == 'corner'
     capsys.readouterr()
     for argv, name in ((['--track-noise-corr', '1.0'], '--track-noise-corr'),
                        (['--position-noise', '0'], '--position-noise'),
-                       (['--family', 'av2', '--track-noise-corr', '0.5'], '--track-noise-corr')):
+                       (['--family', 'av2', '--track-noise-corr', '0.5'], '--track-noise-corr'),
+                       (['--family', 'sumo', '--turn-shape', 'corner'], '--turn-shape')):
         assert _cli(['bench', '--n', '1', '--oracle', *argv]) == 2
         assert name in capsys.readouterr().err

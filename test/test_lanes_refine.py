@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy.ndimage import uniform_filter1d
 
 from test_lanes_synth import synth_case
 
@@ -58,7 +59,7 @@ def test_refine_option_runs_after_the_chain():
 def test_refine_init_option_refines_the_start_and_samples_from_it():
     """``refine_init`` evaluates the posterior before the prior's mean angles were read
     from the start; they are read before and again after the refinement."""
-    plain, est = _estimator(), _estimator(refine_init=1)
+    plain, est = _estimator(refine_init=0), _estimator(refine_init=1, refine_select=0)
     assert np.isfinite(est.log_posterior())
     moved = max(float(np.abs(a.center - b.center).max())
                 for a, b in zip(plain.lanelets, est.lanelets))
@@ -106,10 +107,10 @@ def test_effective_share_counts_a_smooth_path_as_one_piece_of_evidence():
 def test_refine_select_keeps_only_connectors_the_traffic_supports():
     """With a penalty no drop can beat every connector keeps its start shape, carried to the
     refined ends; without one the refinement's shape stays, as with ``refine_select`` 0."""
-    plain = _estimator(refine_init=1)
+    plain = _estimator(refine_init=1, refine_select=0)
     free = _estimator(refine_init=1, refine_select=1e-9)
     stiff = _estimator(refine_init=1, refine_select=1000.0)
-    start = _estimator()
+    start = _estimator(refine_init=0)
     conns = [i for i, l in enumerate(plain.lanelets) if l.kind == 'connector']
     for i in conns:
         np.testing.assert_allclose(free.lanelets[i].center, plain.lanelets[i].center, atol=1e-9)
@@ -120,3 +121,29 @@ def test_refine_select_keeps_only_connectors_the_traffic_supports():
         s, a = stiff.lanelets[i].center, start.lanelets[i].center
         bend = lambda c: np.diff(np.unwrap(np.arctan2(*np.diff(c, axis=0).T[::-1])))
         assert np.abs(bend(s).sum() - bend(a).sum()) < 0.1
+
+
+def test_refine_min_share_leaves_a_start_whose_residuals_follow_each_track():
+    """``refine_min_share``: white detection noise (share ~1) is refined as without the
+    option; the same tracks smoothed along their rows (a tracker's output: the residuals of
+    neighbouring rows alike, share ~0) keep the start."""
+    topo, _, _, dets = CASE
+    gated = _estimator(refine_init=1, refine_select=0, refine_min_share=0.33)
+    for a, b in zip(gated.lanelets, _estimator(refine_init=1, refine_select=0, refine_min_share=0).lanelets):
+        np.testing.assert_array_equal(a.center, b.center)
+    smooth = dets.subset(np.ones(len(dets), bool))
+    for i in np.unique(dets.track_id):
+        rows = np.flatnonzero(dets.track_id == i)
+        rows = rows[np.argsort(dets.t[rows])]
+        smooth.xy[rows] = uniform_filter1d(dets.xy[rows], 21, axis=0, mode='nearest')
+
+    def lanes(**kw):
+        est = LaneCourseEstimator(LaneConfig(**kw), 0)
+        est.initialise(topo, smooth)
+        return est.lanelets
+    start = lanes(refine_init=0)
+    kept = lanes(refine_init=1, refine_select=0, refine_min_share=0.33)
+    refined = lanes(refine_init=1, refine_select=0, refine_min_share=0)
+    for a, b in zip(kept, start):
+        np.testing.assert_array_equal(a.center, b.center)
+    assert max(float(np.abs(a.center - b.center).max()) for a, b in zip(refined, start)) > 1e-3

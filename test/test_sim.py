@@ -201,6 +201,31 @@ def test_tracked_noise_correlated_along_a_track_option():
     assert simulate_scenario(5).detections('tracked').xy.tobytes() == dw.xy.tobytes()
 
 
+def test_corner_turn_shape_option():
+    """``turn_shape='corner'``: connectors through the corner of their lanes' lines (handles
+    2/3 of the way there; straight on: chord/3), a family the lane course's start does not
+    share; the vehicles drive them, and the default draws the arcs as before."""
+    from intersection_estimator.sim.scenario import _corner_handles, _handles
+    p0, d0, p3, d3 = np.zeros(2), np.array([1.0, 0.0]), np.array([10.0, 10.0]), np.array([0.0, 1.0])
+    assert _corner_handles(p0, d0, p3, d3, math.hypot(10, 10)) == pytest.approx((20 / 3, 20 / 3))
+    straight = np.array([20.0, 0.0])
+    assert _corner_handles(p0, d0, straight, d0, 20.0) == pytest.approx((20 / 3, 20 / 3))
+    arc = _handles(p0, d0, p3, d3)[0][0]            # 0.39 chord (a circular arc)
+    assert arc == pytest.approx(4 / 3 * math.tan(math.pi / 8) * 10)
+    base, corner = simulate_scenario(5), simulate_scenario(5, SimConfig(turn_shape='corner'))
+    def bends(c):
+        u, v = c[1] - c[0], c[-1] - c[-2]
+        return abs(u[0] * v[1] - u[1] * v[0]) > 1e-3
+    turns = [(a, b) for a, b in zip(base.gt_lanelets, corner.gt_lanelets)
+             if a.kind == 'connector' and bends(a.center)]
+    assert turns and all(np.allclose(a.center[[0, -1]], b.center[[0, -1]]) for a, b in turns)
+    gap = max(float(np.abs(a.center[len(a.center) // 2] - b.center[len(b.center) // 2]).max())
+              for a, b in turns)
+    assert gap > 0.3                                # the middles of the turns moved
+    assert simulate_scenario(5, SimConfig(turn_shape='arc')).detections('tracked').xy.tobytes() \
+        == base.detections('tracked').xy.tobytes()
+
+
 def test_raw_radar_doppler_sign_and_clutter():
     sc = simulate_scenario(6)
     d = sc.detections('raw')

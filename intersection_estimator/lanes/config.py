@@ -116,6 +116,9 @@ _RANGES = {
     'refine_init': ('[0, 1]', 'penalised least-squares refinement of the initialisation'),
     'refine_select': ('[0.0, 1000.0]', 'refine_init: a connector keeps its refined shape only when '
                       'better by this per effective parameter (0: always)'),
+    'refine_min_share': ('[0.0, 1.0]', 'refine_init: only where the start\'s residuals count at least '
+                         'this share of their points as independent, (1 - rho) / (1 + rho) by their '
+                         'lag-1 correlation rho (0: always)'),
     'refine_smooth': ('[0.0, 1e6]', 'weight of the second-difference penalty of the refinement'),
     'refine_smooth_connector': ('[0.0, 1e6]', 'second-difference weight inside connectors'),
     'refine_keep_shape': ('[0, 1]', '1: penalise second differences relative to the initial shape'),
@@ -213,6 +216,7 @@ class LaneConfig:
     refine: int = 0
     refine_init: int = 0
     refine_select: float = 0.0       # docs/real_junctions.md, "Stop 54"
+    refine_min_share: float = 0.0    # docs/real_junctions.md, "Stop 55"
     refine_smooth: float = 1e4
     refine_smooth_connector: float = 300.0
     refine_keep_shape: int = 1

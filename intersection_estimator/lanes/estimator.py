@@ -238,14 +238,19 @@ class LaneCourseEstimator:
         points better than the start by more than ``refine_select`` per effective parameter of
         the refinement on them (:func:`.refine.lanelet_dof`), in Akaike's form with the points
         that count as independent (:func:`.refine.effective_share`); elsewhere the start's
-        shape is carried to the refined ends."""
+        shape is carried to the refined ends. A start whose residuals count fewer independent
+        points than ``refine_min_share`` of them (a tracker's smoothed error: the refinement
+        would read each track's bias as the lane's course) stays as it is."""
         g, cfg = self.graph, self.config
         conns = [i for i, s in enumerate(g.specs) if s.kind == 'connector']
+        if cfg.refine_select or cfg.refine_min_share:
+            P0, (r0, l0) = g.P.copy(), self._residuals()
+            share = effective_share(r0, l0)
+            if share < cfg.refine_min_share:
+                return
         if not cfg.refine_select:
             self._refine(assign=True)
         else:
-            P0, (r0, l0) = g.P.copy(), self._residuals()
-            share = effective_share(r0, l0)
             dof = self._refine(assign=True, dof_of=conns)
             r1, l1 = self._residuals()
             n = len(g.specs)

@@ -162,15 +162,19 @@ def _max_curvature(p0, p1, p2, p3, n=200) -> float:
     return float((cross / np.maximum(np.linalg.norm(v, axis=1), 1e-9) ** 3).max())
 
 
-def _handles(p0, d0, p3, d3):
-    """Control points p1, p2: handles of a circular arc through the turn angle (chord/3
-    straight, ~0.39 at 90 deg); if that turns tighter than MIN_TURN_RADIUS, the pair of
-    handle lengths (0.1-1 chord each) with the gentlest turn."""
+def _handles(p0, d0, p3, d3, shape: str = 'arc'):
+    """Control points p1, p2 of a connector (``SimConfig.turn_shape``): ``'arc'``, the handles
+    of a circular arc through the turn angle (chord/3 straight, ~0.39 at 90 deg);
+    ``'corner'``, :func:`_corner_handles`. If that turns tighter than MIN_TURN_RADIUS, the
+    pair of handle lengths (0.1-1 chord each) with the gentlest turn."""
     chord = float(np.linalg.norm(p3 - p0))
-    phi = math.acos(float(np.clip(np.dot(d0, d3), -1.0, 1.0)))
-    ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
-    h = chord * min(ratio, 0.5)
-    p1, p2 = p0 + h * d0, p3 - h * d3
+    if shape == 'corner':
+        h0, h3 = _corner_handles(p0, d0, p3, d3, chord)
+    else:
+        phi = math.acos(float(np.clip(np.dot(d0, d3), -1.0, 1.0)))
+        ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
+        h0 = h3 = chord * min(ratio, 0.5)
+    p1, p2 = p0 + h0 * d0, p3 - h3 * d3
     if _max_curvature(p0, p1, p2, p3) * MIN_TURN_RADIUS <= 1.0:
         return p1, p2
     grid = np.linspace(0.1, 1.0, 10) * chord
@@ -178,9 +182,24 @@ def _handles(p0, d0, p3, d3):
     return p0 + h0 * d0, p3 - h3 * d3
 
 
-def _bezier(p0, d0, p3, d3, spacing):
+def _corner_handles(p0, d0, p3, d3, chord: float) -> tuple[float, float]:
+    """Handle lengths of the quadratic Bezier through the corner where the entering lane's
+    line (``p0`` along ``d0``) meets the leaving lane's (back from ``p3`` along ``d3``),
+    raised to a cubic (2/3 of the way to the corner; SUMO draws its internal lanes this
+    way): a family of its own, asymmetric where the lane ends are, apart from the circular
+    arcs the estimator's connectors start from. Lines that meet behind an end or not at
+    all (straight on): chord/3 each; at most one chord each (a near U-turn)."""
+    A = np.column_stack([d0, d3])
+    if abs(float(np.linalg.det(A))) > 1e-6:
+        a, b = np.linalg.solve(A, p3 - p0)
+        if a > 0 and b > 0:
+            return min(2.0 / 3.0 * a, chord), min(2.0 / 3.0 * b, chord)
+    return chord / 3.0, chord / 3.0
+
+
+def _bezier(p0, d0, p3, d3, spacing, shape: str = 'arc'):
     """Cubic Bezier from p0 (heading d0) to p3 (heading d3): points, tangents, params."""
-    p1, p2 = _handles(p0, d0, p3, d3)
+    p1, p2 = _handles(p0, d0, p3, d3, shape)
     fine = np.linspace(0.0, 1.0, 400)[:, None]
     pts = ((1 - fine) ** 3 * p0 + 3 * (1 - fine) ** 2 * fine * p1
            + 3 * (1 - fine) * fine ** 2 * p2 + fine ** 3 * p3)
@@ -192,10 +211,11 @@ def _bezier(p0, d0, p3, d3, spacing):
     return pts, tan, t[:, 0]
 
 
-def _connector(inter, a, k_in, b, k_out, lin: Lanelet, lout: Lanelet, spacing) -> Lanelet:
+def _connector(inter, a, k_in, b, k_out, lin: Lanelet, lout: Lanelet, spacing,
+               shape: str = 'arc') -> Lanelet:
     d0 = -inter.arms[a].direction
     d3 = inter.arms[b].direction
-    center, tan, t = _bezier(lin.center[-1], d0, lout.center[0], d3, spacing)
+    center, tan, t = _bezier(lin.center[-1], d0, lout.center[0], d3, spacing, shape)
     w = (1 - t) * inter.arms[a].lane_width + t * inter.arms[b].lane_width
     left, right = _borders(center, tan, 0.5 * w)
     # share the end points exactly with the lanes it joins (Lanelet2 routing)
@@ -219,7 +239,7 @@ def build_lanelets(rng: np.random.Generator, inter: Intersection, cfg: SimConfig
     connectors = []
     for a, k_in, b, k_out in connector_pairs(inter):
         lin, lout = lanes[lane_id(a, ENTERING, k_in)], lanes[lane_id(b, LEAVING, k_out)]
-        con = _connector(inter, a, k_in, b, k_out, lin, lout, cfg.point_spacing)
+        con = _connector(inter, a, k_in, b, k_out, lin, lout, cfg.point_spacing, cfg.turn_shape)
         lin.successors.append(con.id)
         connectors.append(con)
     return list(lanes.values()) + connectors
