@@ -37,6 +37,7 @@ import traceback
 from .estimate_io import dumps, estimate_to_dict
 from .evaluate import aggregate, evaluate
 from .sim import MODES, SimConfig, simulate_scenario
+from .sim.scenario import TURN_HANDLES
 from .tracking import TrackerConfig
 
 __all__ = ['BenchOptions', 'run_bench', 'run_case', 'format_table', 'PAPER', 'register',
@@ -82,7 +83,7 @@ class BenchOptions:
 
 
 FAMILIES = ('table1', 'sumo', 'sumo_road', 'av2')
-TURN_SHAPES = ('arc', 'corner')
+TURN_SHAPES = tuple(TURN_HANDLES)
 _SCENARIO_FIELDS = ('seed', 'config', 'gt', 'gt_lanelets', 'traffic', 'tracks', 'ego', 'duration',
                     'stop', 'sensor_range', 'sensors')
 
@@ -380,8 +381,8 @@ def format_table(result: dict) -> str:
     ]
     radar = ('' if cfg['mode'] != 'raw' else
              '  radar_tracking=' + ('on' if cfg.get('radar_tracking', True) else 'off (paper model)'))
-    radar += '' if cfg.get('turn_shape', 'arc') == 'arc' else f"  turn_shape={cfg['turn_shape']}"
-    head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}{radar}  n={cfg['n']}  "
+    turns = '' if cfg.get('turn_shape', 'arc') == 'arc' else f"  turn_shape={cfg['turn_shape']}"
+    head = (f"bench  family={cfg.get('family', 'table1')}  mode={cfg['mode']}{radar}{turns}  n={cfg['n']}  "
             f"seed={cfg['seed']}  jobs={cfg['jobs']}  "
             f"estimator={cfg['estimator']}")
     w0 = max(len(r[0]) for r in rows)

@@ -224,6 +224,8 @@ def test_corner_turn_shape_option():
     assert gap > 0.3                                # the middles of the turns moved
     assert simulate_scenario(5, SimConfig(turn_shape='arc')).detections('tracked').xy.tobytes() \
         == base.detections('tracked').xy.tobytes()
+    with pytest.raises(ValueError, match='turn_shape'):
+        simulate_scenario(5, SimConfig(turn_shape='clothoid'))
 
 
 def test_raw_radar_doppler_sign_and_clutter():

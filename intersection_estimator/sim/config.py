@@ -63,13 +63,12 @@ class SimConfig:
     duration: tuple[float, float] = (20.0, 40.0)    # scenario length [s]
     cruise_speed: tuple[float, float] = (8.0, 14.0)  # approach speed [m/s]
     max_lat_acc: float = 2.5                        # turn speed limit v^2 * kappa [m/s^2]
-    # connector center lines (scenario._handles): 'arc', circular-arc Beziers -- the family the
-    # lane course's connectors start from (lanes/init.py), so the bench cannot see that
-    # start's error; 'corner', Beziers through the corner of the lanes' lines (SUMO's way)
-    turn_shape: str = 'arc'
-
     max_acc: float = 2.0                            # [m/s^2]
     max_dec: float = 3.0                            # [m/s^2]
+    # connector center lines (scenario.TURN_HANDLES): 'arc', circular-arc Beziers -- the family
+    # the lane course's connectors start from (lanes/init.py), so the bench cannot see that
+    # start's error; 'corner', Beziers through the corner of the lanes' lines (SUMO's way)
+    turn_shape: str = 'arc'
     # --- ego vehicle --------------------------------------------------------------
     ego_speed: tuple[float, float] = (8.0, 12.0)    # approach speed [m/s]
     ego_stop_gap: tuple[float, float] = (2.0, 6.0)  # stops this far before the stop line

@@ -163,23 +163,28 @@ def _max_curvature(p0, p1, p2, p3, n=200) -> float:
 
 
 def _handles(p0, d0, p3, d3, shape: str = 'arc'):
-    """Control points p1, p2 of a connector (``SimConfig.turn_shape``): ``'arc'``, the handles
-    of a circular arc through the turn angle (chord/3 straight, ~0.39 at 90 deg);
-    ``'corner'``, :func:`_corner_handles`. If that turns tighter than MIN_TURN_RADIUS, the
-    pair of handle lengths (0.1-1 chord each) with the gentlest turn."""
+    """Control points p1, p2 of a connector, its handles by ``SimConfig.turn_shape``
+    (:data:`TURN_HANDLES`: :func:`_arc_handles`, :func:`_corner_handles`); if that turns
+    tighter than MIN_TURN_RADIUS, the pair of handle lengths (0.1-1 chord each) with the
+    gentlest turn."""
     chord = float(np.linalg.norm(p3 - p0))
-    if shape == 'corner':
-        h0, h3 = _corner_handles(p0, d0, p3, d3, chord)
-    else:
-        phi = math.acos(float(np.clip(np.dot(d0, d3), -1.0, 1.0)))
-        ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
-        h0 = h3 = chord * min(ratio, 0.5)
+    if shape not in TURN_HANDLES:
+        raise ValueError(f'turn_shape {shape!r} is not one of {sorted(TURN_HANDLES)}')
+    h0, h3 = TURN_HANDLES[shape](p0, d0, p3, d3, chord)
     p1, p2 = p0 + h0 * d0, p3 - h3 * d3
     if _max_curvature(p0, p1, p2, p3) * MIN_TURN_RADIUS <= 1.0:
         return p1, p2
     grid = np.linspace(0.1, 1.0, 10) * chord
     _, h0, h3 = min((_max_curvature(p0, p0 + a * d0, p3 - b * d3, p3), a, b) for a in grid for b in grid)
     return p0 + h0 * d0, p3 - h3 * d3
+
+
+def _arc_handles(p0, d0, p3, d3, chord: float) -> tuple[float, float]:
+    """Handle lengths of a circular arc through the turn angle: chord/3 straight, ~0.39
+    chord at 90 deg, at most chord/2."""
+    phi = math.acos(float(np.clip(np.dot(d0, d3), -1.0, 1.0)))
+    ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
+    return chord * min(ratio, 0.5), chord * min(ratio, 0.5)
 
 
 def _corner_handles(p0, d0, p3, d3, chord: float) -> tuple[float, float]:
@@ -195,6 +200,10 @@ def _corner_handles(p0, d0, p3, d3, chord: float) -> tuple[float, float]:
         if a > 0 and b > 0:
             return min(2.0 / 3.0 * a, chord), min(2.0 / 3.0 * b, chord)
     return chord / 3.0, chord / 3.0
+
+
+#: ``SimConfig.turn_shape`` -> handle lengths of a connector (:func:`_handles`)
+TURN_HANDLES = {'arc': _arc_handles, 'corner': _corner_handles}
 
 
 def _bezier(p0, d0, p3, d3, spacing, shape: str = 'arc'):
