@@ -240,12 +240,13 @@ def test_lanelets_from_topology():
 
 
 def test_connector_initial_shape_is_the_arc_bezier():
-    """Without the traffic fit (``connector_traffic`` 0) connectors start on the arc-like
-    Bezier tangent to their lanes (equidistant stations)."""
+    """Without the traffic fit (``connector_traffic`` 0) and the start's refinement
+    (``refine_init`` 0) connectors start on the arc-like Bezier tangent to their lanes
+    (equidistant stations)."""
     from intersection_estimator.lanes.init import arc_bezier
     from intersection_estimator.evaluate import orthogonal_distances
     topo, _, _, dets = CASE
-    est = LaneCourseEstimator(LaneConfig(stop_fit=0, connector_traffic=0), 0)
+    est = LaneCourseEstimator(LaneConfig(stop_fit=0, connector_traffic=0, refine_init=0), 0)
     est.initialise(topo, dets)
     ls = {l.id: l for l in est.lanelets}
     for c in (l for l in ls.values() if l.kind == 'connector'):

@@ -87,8 +87,10 @@ def test_doubled_center_inserts_midpoints():
 
 
 def test_neighbour_lanes_share_border_points_initially():
+    """The start's construction (its refinement, ``refine_init``, moves the lane ends that
+    the connectors hold apart by millimetres, and the samples move them further)."""
     topo, _, _, dets = _case(1)
-    est = LaneCourseEstimator(LaneConfig(), 0)
+    est = LaneCourseEstimator(LaneConfig(refine_init=0), 0)
     est.initialise(topo, dets)
     ls = {l.id: l for l in est.lanelets}
     a, b = ls['a0_in0'], ls['a0_in1']

@@ -111,6 +111,8 @@ _RANGES = {
     'temp_end': ('[1e-4, 1e4]', 'annealing temperature after anneal_samples'),
     'anneal_samples': ('[1, 1e9]', 'length of the geometric annealing schedule'),
     'warm_tolerance': ('[0.0, 100.0]', 'warm start only while the new initial course is this close [m]'),
+    'warm_from_start': ('[0, 1]', "1: ... to the start the chain was built from; 0: to the chain's "
+                        'current course'),
     'keep_best': ('[0, 1]', '1: end each run in the best state seen (MAP), 0: in the final state'),
     'refine': ('[0, 1]', 'penalised least-squares refinement (Meyer 2020 style) after the MCMC'),
     'refine_init': ('[0, 1]', 'penalised least-squares refinement of the initialisation'),
@@ -212,11 +214,12 @@ class LaneConfig:
     temp_end: float = 0.02
     anneal_samples: int = 20000
     warm_tolerance: float = 0.3
+    warm_from_start: int = 1         # docs/real_junctions.md, "Stop 55"
     keep_best: int = 1
     refine: int = 0
-    refine_init: int = 0
-    refine_select: float = 0.0       # docs/real_junctions.md, "Stop 54"
-    refine_min_share: float = 0.0    # docs/real_junctions.md, "Stop 55"
+    refine_init: int = 1             # docs/real_junctions.md, "Stop 55"
+    refine_select: float = 2.0       # docs/real_junctions.md, "Stop 54", "Stop 55"
+    refine_min_share: float = 0.33   # docs/real_junctions.md, "Stop 55"
     refine_smooth: float = 1e4
     refine_smooth_connector: float = 300.0
     refine_keep_shape: int = 1

@@ -128,6 +128,7 @@ class LaneCourseEstimator:
         self.graph: LaneGraph | None = None
         self._key = None
         self._k = 0
+        self._start = None                # the centers the current chain's course started from
         self.timings: dict = {}
         self.last_chain = (0, 0.0, 0.0)   # (accepted, dlogP of final state, of best state)
         self._pending = None              # a prepared half of an initialisation (prepare)
@@ -172,10 +173,11 @@ class LaneCourseEstimator:
         self._pending = None
         add_connectors(specs, index, self._trajs, self.config)
         key = (_topology_key(topology), tuple(s.id for s in specs))
-        if self.graph is not None and key == self._key and self._close_to(specs):
+        centers = np.concatenate([0.5 * (s.left + s.right) for s in specs]) if specs else None
+        if self.graph is not None and key == self._key and self._close_to(specs, centers):
             self._setup_likelihood()
         else:
-            self._key, self._k = key, 0
+            self._key, self._k, self._start = key, 0, centers
             self.graph = build_graph(specs, pairs) if specs else None
             if self.graph is not None:
                 self._setup_graph()
@@ -183,13 +185,15 @@ class LaneCourseEstimator:
         self.timings['initialise'] = self.halves['prepare'] + self.halves['finish']
         return given
 
-    def _close_to(self, specs) -> bool:
+    def _close_to(self, specs, centers) -> bool:
+        """Does the new initial course (``specs``, their ``centers``) lie within
+        ``warm_tolerance`` of the chain's current course, or with ``warm_from_start`` of the
+        start it was built from (before the start's refinement and the samples moved it)?"""
         g = self.graph
         if len(specs) != len(g.specs) or any(len(s.left) != n for s, n in zip(specs, g.st_n)):
             return False
-        new = np.concatenate([0.5 * (s.left + s.right) for s in specs])
-        return float(np.max(np.linalg.norm(new - g.centers(), axis=1))) <= \
-            self.config.warm_tolerance
+        ref = self._start if self.config.warm_from_start else g.centers()
+        return float(np.max(np.linalg.norm(centers - ref, axis=1))) <= self.config.warm_tolerance
 
     def _preprocess(self, topology: Intersection, dets: Detections | None):
         """Trajectories split and assigned, arm frames re-fitted, stop lines fitted; the
