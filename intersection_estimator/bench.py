@@ -431,29 +431,32 @@ def _merge_cmd(args) -> int:
     return 0
 
 
+def _refused(args) -> str | None:
+    """Why the simulation options of ``args`` are refused (the first reason, naming its
+    option), or None."""
+    simulated = args.family in ('table1', 'sumo', 'sumo_road')
+    for bad, why in (
+            (not 0.0 <= args.empty_lanes < 1.0, f'--empty-lanes {args.empty_lanes} not in [0, 1)'),
+            (not 0.0 <= args.track_noise_corr < 1.0,
+             f'--track-noise-corr {args.track_noise_corr} not in [0, 1)'),
+            (not args.position_noise > 0.0, f'--position-noise {args.position_noise} must be > 0'),
+            ((args.track_noise_corr or args.position_noise != 1.0) and not simulated,
+             '--track-noise-corr / --position-noise apply to the simulated families only'),
+            (args.empty_lanes and args.family != 'table1',
+             '--empty-lanes applies to --family table1 only'),
+            (args.turn_shape != 'arc' and args.family != 'table1',
+             '--turn-shape applies to --family table1 only (SUMO draws its own turns)')):
+        if bad:
+            return why
+    return None
+
+
 def _cmd(args) -> int:
     if args.merge:
         return _merge_cmd(args)
-    if not 0.0 <= args.empty_lanes < 1.0:
-        print(f'bench: --empty-lanes {args.empty_lanes} not in [0, 1)', file=sys.stderr)
-        return 2
-    if not 0.0 <= args.track_noise_corr < 1.0:
-        print(f'bench: --track-noise-corr {args.track_noise_corr} not in [0, 1)', file=sys.stderr)
-        return 2
-    if not args.position_noise > 0.0:
-        print(f'bench: --position-noise {args.position_noise} must be > 0', file=sys.stderr)
-        return 2
-    if (args.track_noise_corr or args.position_noise != 1.0) and \
-            args.family not in ('table1', 'sumo', 'sumo_road'):
-        print('bench: --track-noise-corr / --position-noise apply to the simulated families only',
-              file=sys.stderr)
-        return 2
-    if args.empty_lanes and args.family != 'table1':
-        print('bench: --empty-lanes applies to --family table1 only', file=sys.stderr)
-        return 2
-    if args.turn_shape != 'arc' and args.family != 'table1':
-        print('bench: --turn-shape applies to --family table1 only (SUMO draws its own turns)',
-              file=sys.stderr)
+    refused = _refused(args)
+    if refused:
+        print(f'bench: {refused}', file=sys.stderr)
         return 2
     opts = BenchOptions(n=args.n, mode=args.mode, samples=args.samples,
                         lane_samples=args.lane_samples, seed=args.seed, jobs=args.jobs,

@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from intersection_estimator.bench import BenchOptions, make_case  # noqa: E402
 from intersection_estimator.pipeline import in_mode, radar_tracked  # noqa: E402
 from intersection_estimator.topology import TopologyConfig  # noqa: E402
-from intersection_estimator.tracking import TrackerConfig, is_radar_track  # noqa: E402
+from intersection_estimator.tracking import TrackerConfig, is_radar_track, radar_rows_of  # noqa: E402
 
 COVER_M = 3.0
 OFF_M = 1.5
@@ -58,7 +58,7 @@ def truth_rows(sc):
 
 def _seen(raw, tt, txy) -> np.ndarray:
     """Mask of true rows with a radar row within ``COVER_M`` at their stamp."""
-    radar = raw.subset(np.isfinite(raw.doppler) & (raw.track_id < 0))
+    radar = raw.subset(radar_rows_of(raw))
     rt = np.round(radar.t * 1000).astype(np.int64)
     seen = np.zeros(len(tt), bool)
     for stamp in np.intersect1d(np.unique(tt), np.unique(rt)):

@@ -247,15 +247,12 @@ class LaneCourseEstimator:
         would read each track's bias as the lane's course) stays as it is."""
         g, cfg = self.graph, self.config
         conns = [i for i, s in enumerate(g.specs) if s.kind == 'connector']
-        if cfg.refine_select or cfg.refine_min_share:
-            P0, (r0, l0) = g.P.copy(), self._residuals()
-            share = effective_share(r0, l0)
-            if share < cfg.refine_min_share:
-                return
-        if not cfg.refine_select:
-            self._refine(assign=True)
-        else:
-            dof = self._refine(assign=True, dof_of=conns)
+        P0, (r0, l0) = g.P.copy(), self._residuals()
+        share = effective_share(r0, l0)
+        if share < cfg.refine_min_share:
+            return
+        dof = self._refine(assign=True, dof_of=conns if cfg.refine_select else ())
+        if cfg.refine_select:
             r1, l1 = self._residuals()
             n = len(g.specs)
             rss0, rss1 = np.bincount(l0, r0 * r0, n), np.bincount(l1, r1 * r1, n)
