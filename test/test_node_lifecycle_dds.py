@@ -25,6 +25,16 @@ class Lifecycle:
     def ready(self) -> bool:
         return self.change.service_is_ready() and self.get.service_is_ready()
 
+    def matched(self) -> bool:
+        """Both services answer us. A transition is not idempotent, so it cannot be re-sent
+        when its answer is lost; a request with an unknown transition label is (the node
+        answers ``success=False`` and stays where it is), so it is re-sent until answered,
+        which proves ~/change_state's response writer has matched our reader."""
+        probe = self.ChangeState.Request()
+        probe.transition.label = 'not_a_transition'
+        answered = self._call(self.change, probe, attempt=10.0)
+        return not answered.success and self.state() is not None
+
     def _call(self, client, request, timeout: float = 120.0, attempt: float | None = None):
         """One request, answered within ``timeout``; with ``attempt`` (idempotent requests
         only) re-sent every ``attempt`` seconds until then: Fast DDS can drop the answer to
@@ -61,6 +71,7 @@ def test_managed_node_follows_its_transitions(ros_context, node_process):
         spin = _spinner(ros_context, listener)
         lc = Lifecycle(ros_context, spin, listener)
         assert wait_for(lc.ready, 120, spin), proc.output()
+        assert lc.matched()
         assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
         assert topos == [] and diags == []                # nothing is published unconfigured
         assert lc.transition(Transition.TRANSITION_CONFIGURE), proc.output()
@@ -97,6 +108,7 @@ def test_managed_node_refuses_to_configure_with_a_bad_parameter(ros_context, nod
         spin = _spinner(ros_context, client)
         lc = Lifecycle(ros_context, spin, client)
         assert wait_for(lc.ready, 120, spin), proc.output()
+        assert lc.matched()
         assert not lc.transition(Transition.TRANSITION_CONFIGURE)
         assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
         assert wait_for(lambda: 'budget_ms' in proc.output(), 60), proc.output()
