@@ -210,6 +210,8 @@ RANGES = {
                        'that, its lane counts set, explains fewer than weak_arm_support passages '
                        'and along which as few tracks drove between part_outside and '
                        'weak_arm_box is left out (topology/support.py)'),
+    'empty_arm_reach': ('[0, 10]', '... tracks within this many lane widths beside the arm\'s '
+                        'lanes drove along it [lane widths]'),
     # anytime API
     'chunk': ('[1, 1e7]', 'samples per compiled call (anytime granularity)'),
     'converge_window': ('[1, inf)', "state 'CONVERGED' after this many samples without gain"),
@@ -353,6 +355,7 @@ class TopologyConfig:
     weak_arm_support: float = 1.0
     weak_arm_box: float = 25.0
     empty_arm_drop: bool = True         # docs/real_junctions.md, "Stop 50"
+    empty_arm_reach: float = 1.0         # docs/real_junctions.md, "Stop 56"
     # anytime API
     chunk: int = 500
     converge_window: int = 2000

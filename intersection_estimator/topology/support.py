@@ -70,7 +70,8 @@ def drop_empty_arms(post: Posterior, S: np.ndarray, sup: np.ndarray, cfg, tracks
     left out."""
     bar = cfg.weak_arm_support
     return _leave_out(post, S, sup, cfg, lambda S, sup, k: sup[k] < bar and near_tracks(
-        S, k, tracks, cfg.part_outside, cfg.weak_arm_box, cfg.min_part_points) < bar)
+        S, k, tracks, cfg.part_outside, cfg.weak_arm_box, cfg.min_part_points,
+        cfg.empty_arm_reach) < bar)
 
 
 def _leave_out(post: Posterior, S: np.ndarray, sup: np.ndarray, cfg, out):

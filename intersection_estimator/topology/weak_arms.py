@@ -34,15 +34,15 @@ from .unexplained import arm_support, best_new_arm, unexplained_angles
 __all__ = ['add_weak_arms', 'box_tracks', 'near_tracks']
 
 
-def _on_arm(S: np.ndarray, k: int, tr: Tracks, outside: float):
+def _on_arm(S: np.ndarray, k: int, tr: Tracks, outside: float, reach: float = REACH):
     """``(on, s, n)``: the rows of ``tr`` that head along arm ``k`` of ``S`` (within
     :data:`.side_by_side.ALIGN_DEG`), beside its lanes (within :data:`.side_by_side.REACH`
-    lane widths) and at least ``outside`` metres out on its axis; ``s`` every row's distance
+    lane widths; ``reach`` for another band) and at least ``outside`` metres out on its axis; ``s`` every row's distance
     out; ``n`` the number of tracks (the length of a per-track count)."""
     i0 = HDR + k * STRIDE
     s, t, c = arm_frame(S, k, tr.xy, tr.h)
-    reach = 0.5 * S[i0 + GAP] + (max(S[i0 + NIN], S[i0 + NOUT]) + REACH) * S[i0 + WID]
-    on = aligned(c) & (np.abs(t) <= reach) & (s >= outside)
+    band = 0.5 * S[i0 + GAP] + (max(S[i0 + NIN], S[i0 + NOUT]) + reach) * S[i0 + WID]
+    on = aligned(c) & (np.abs(t) <= band) & (s >= outside)
     return on, s, (int(tr.tix[-1]) + 1 if len(tr.tix) else 0)
 
 
@@ -58,11 +58,12 @@ def box_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float) ->
 
 
 def near_tracks(S: np.ndarray, k: int, tr: Tracks, outside: float, box: float,
-                min_rows: int) -> int:
-    """Tracks with at least ``min_rows`` rows on arm ``k`` of ``S`` (:func:`_on_arm`)
-    between ``outside`` and ``box`` metres out: vehicles that drove the arm next to the box,
-    also where the road comes into view only there (a side road behind a corner)."""
-    on, s, n = _on_arm(S, k, tr, outside)
+                min_rows: int, reach: float = REACH) -> int:
+    """Tracks with at least ``min_rows`` rows on arm ``k`` of ``S`` (:func:`_on_arm`, within
+    ``reach`` lane widths beside its lanes) between ``outside`` and ``box`` metres out:
+    vehicles that drove the arm next to the box, also where the road comes into view only
+    there (a side road behind a corner)."""
+    on, s, n = _on_arm(S, k, tr, outside, reach)
     return int((np.bincount(tr.tix[on & (s <= box)], minlength=n) >= min_rows).sum())
 
 

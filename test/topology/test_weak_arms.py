@@ -16,7 +16,7 @@ from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.mcmc import Posterior
 from intersection_estimator.topology.side_by_side import tracks_of
-from intersection_estimator.topology.state import NARMS, arm_angles, pack_state
+from intersection_estimator.topology.state import HDR, NARMS, STRIDE, WID, arm_angles, pack_state
 from intersection_estimator.topology.support import reported
 from intersection_estimator.topology.unexplained import best_new_arm, unexplained_angles
 from intersection_estimator.topology.weak_arms import add_weak_arms, box_tracks, near_tracks
@@ -145,3 +145,26 @@ def test_a_road_seen_only_next_to_the_box_has_near_tracks_but_no_box_tracks():
     assert box_tracks(S, LONE, short, 12.0, 25.0) == 0
     assert near_tracks(S, LONE, tracks_of(_dets()), 12.0, 25.0, 3) == 0
     assert near_tracks(S, LONE, short, 12.0, 25.0, 100) == 0      # too few rows
+
+
+def test_near_tracks_counts_only_traffic_within_reach_of_the_arms_lanes():
+    """A vehicle driving along arm ``LONE`` 1.5 lane widths beyond the outer edge of its
+    entering lanes (its wider side; another road beside it, a curved neighbouring approach)
+    drove beside the arm, not along it: it counts with ``reach`` 2 lane widths and not with
+    1 (``empty_arm_reach``; SUMO seed 118: a phantom arm kept by one track 2 lanes beyond
+    its lanes)."""
+    S = pack_state(GT)
+    b = GT.arms[LONE]
+    assert b.lanes_in > b.lanes_out
+    w = float(S[HDR + LONE * STRIDE + WID])               # the arm's lane width in the state
+    offsets = b.lane_offsets(ENTERING, GT.traffic_side)
+    edge = float(np.abs(offsets).max()) + 0.5 * w
+    side = np.sign(offsets[0])
+
+    def beside(rng, tid):
+        pts = [GT.center + s * b.direction + side * (edge + 1.5 * w) * b.normal
+               for s in np.arange(13.0, 24.0, 1.0)]
+        return _path(pts, rng, tid, noise=0.05)
+    tr = tracks_of(_dets([beside]))
+    assert near_tracks(S, LONE, tr, 12.0, 25.0, 3, reach=2.0) == 1
+    assert near_tracks(S, LONE, tr, 12.0, 25.0, 3, reach=1.0) == 0
