@@ -26,14 +26,14 @@ class Lifecycle:
         return self.change.service_is_ready() and self.get.service_is_ready()
 
     def matched(self) -> bool:
-        """Both services answer us. A transition is not idempotent, so it cannot be re-sent
-        when its answer is lost; a request with an unknown transition label is (the node
-        answers ``success=False`` and stays where it is), so it is re-sent until answered,
-        which proves ~/change_state's response writer has matched our reader."""
+        """Does ~/change_state answer us, and refuse what it cannot do? A transition is not
+        idempotent, so it cannot be re-sent when its answer is lost; a request with an
+        unknown transition label is (the node answers ``success=False`` and stays where it
+        is), so it is re-sent until answered, which proves the service's response writer has
+        matched our reader before the first real transition goes out."""
         probe = self.ChangeState.Request()
         probe.transition.label = 'not_a_transition'
-        answered = self._call(self.change, probe, attempt=10.0)
-        return not answered.success and self.state() is not None
+        return not self._call(self.change, probe, attempt=10.0).success
 
     def _call(self, client, request, timeout: float = 120.0, attempt: float | None = None):
         """One request, answered within ``timeout``; with ``attempt`` (idempotent requests

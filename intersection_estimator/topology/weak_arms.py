@@ -36,9 +36,10 @@ __all__ = ['add_weak_arms', 'box_tracks', 'near_tracks']
 
 def _on_arm(S: np.ndarray, k: int, tr: Tracks, outside: float, reach: float = REACH):
     """``(on, s, n)``: the rows of ``tr`` that head along arm ``k`` of ``S`` (within
-    :data:`.side_by_side.ALIGN_DEG`), beside its lanes (within :data:`.side_by_side.REACH`
-    lane widths; ``reach`` for another band) and at least ``outside`` metres out on its axis; ``s`` every row's distance
-    out; ``n`` the number of tracks (the length of a per-track count)."""
+    :data:`.side_by_side.ALIGN_DEG`), beside its lanes (within ``reach`` lane widths beyond
+    them, by default :data:`.side_by_side.REACH`) and at least ``outside`` metres out on its
+    axis; ``s`` every row's distance out; ``n`` the number of tracks (the length of a
+    per-track count)."""
     i0 = HDR + k * STRIDE
     s, t, c = arm_frame(S, k, tr.xy, tr.h)
     band = 0.5 * S[i0 + GAP] + (max(S[i0 + NIN], S[i0 + NOUT]) + reach) * S[i0 + WID]
