@@ -178,6 +178,8 @@ RANGES = {
     'radar_tracks_add_support': ('[0, inf)', 'descent_add_support for a window whose tracks all '
                                  'come from the radar tracker (0: off; their breaks leave parts '
                                  'no arm explains)'),
+    'radar_tracks_min_part_length': ('[0, 100]', 'min_part_length for a window whose tracks all '
+                                     'come from the radar tracker [m]'),
     # reported estimate
     'side_by_side_overlap': ('[0, 1000]', 'an arm has at least the lanes that trajectory parts '
                              'overlapping by this many metres show side by side (0: off; '
@@ -343,6 +345,7 @@ class TopologyConfig:
     descent_top: int = 0
     descent_add_support: float = 1.5
     radar_tracks_add_support: float = 3.0   # descent_add_support on radar-tracker windows
+    radar_tracks_min_part_length: float = 3.0   # docs/real_junctions.md, "Stop 56"
     # reported estimate
     side_by_side_overlap: float = 8.0
     side_by_side_cap: int = 2

@@ -64,7 +64,9 @@ class TopologyEstimator:
         tracked, plain = self.cfg.for_tracks(), self.cfg.for_voxels()
         self._tables_all = Tables(tracked)
         self._tables_plain = self._tables_all if plain == tracked else Tables(plain)
-        self._pcfg = self.cfg.preprocess_config()
+        self._pcfg_all = self.cfg.preprocess_config()
+        self._pcfg_radar = replace(self._pcfg_all,
+                                   min_part_length=self.cfg.radar_tracks_min_part_length)
         self.reset()
 
     # ------------------------------------------------------------------ public API
@@ -267,6 +269,14 @@ class TopologyEstimator:
                     S[HDR + BEND:HDR + MAXA * STRIDE:STRIDE] = 0.0
                 g = S[HDR + GAP:HDR + MAXA * STRIDE:STRIDE]
                 np.minimum(g, gmax, out=g)
+
+    @property
+    def _pcfg(self):
+        """The preprocessing parameters of this window: a window whose tracks all come from
+        the radar tracker keeps trajectory parts from ``radar_tracks_min_part_length`` (a
+        radar track starts some metres after its vehicle appears: on a road the net cuts
+        17 m out its parts beyond ``part_outside`` are 3-5 m long)."""
+        return self._pcfg_radar if self._radar_tracks else self._pcfg_all
 
     @property
     def _tables(self) -> Tables:

@@ -309,3 +309,23 @@ def test_an_arm_only_a_standing_radar_queue_shows_is_found_through_the_tracker(s
         return any(abs(a.angle - math.pi / 2) < math.radians(15) for a in inter.arms)
     assert north(TrackerConfig())
     assert not north(dataclasses.replace(TrackerConfig(), standing_s=0.0))
+
+
+def test_a_window_of_radar_tracks_keeps_shorter_trajectory_parts():
+    """Preprocessing per window: radar-tracker windows keep trajectory parts from
+    ``radar_tracks_min_part_length`` (3 m), other windows from ``min_part_length`` (5 m). A
+    vehicle seen from 16 m out, where the net cuts its road, leaves 4 m beyond
+    ``part_outside`` (12 m): a part of a radar track, none of a tracked object."""
+    from intersection_estimator.topology import TopologyEstimator
+    xy = np.stack([np.linspace(16.0, 0.0, 33), np.zeros(33)], axis=1)     # 0.5 m a row
+    track = Detections.make(xy, np.arange(33) * 0.05, heading=np.full(33, np.pi),
+                            track_id=np.full(33, RADAR_TRACK_ID0))
+    cfg = TopologyConfig()
+    assert cfg.radar_tracks_min_part_length < 4.0 < cfg.min_part_length
+    est = TopologyEstimator(cfg, 0)
+    est.set_observations(track)
+    assert est._pcfg.min_part_length == cfg.radar_tracks_min_part_length
+    assert len(est._preprocessed(np.zeros(2), None)) == 1
+    est.set_observations(dataclasses.replace(track, track_id=track.track_id - RADAR_TRACK_ID0))
+    assert est._pcfg.min_part_length == cfg.min_part_length
+    assert len(est._preprocessed(np.zeros(2), None)) == 0
