@@ -247,10 +247,11 @@ class LaneCourseEstimator:
         would read each track's bias as the lane's course) stays as it is."""
         g, cfg = self.graph, self.config
         conns = [i for i, s in enumerate(g.specs) if s.kind == 'connector']
-        P0, (r0, l0) = g.P.copy(), self._residuals()
+        r0, l0 = self._residuals()
         share = effective_share(r0, l0)
         if share < cfg.refine_min_share:
             return
+        P0 = g.P.copy() if cfg.refine_select else None      # the start, for _carry_shape
         dof = self._refine(assign=True, dof_of=conns if cfg.refine_select else ())
         if cfg.refine_select:
             r1, l1 = self._residuals()

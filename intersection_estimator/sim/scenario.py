@@ -184,7 +184,8 @@ def _arc_handles(p0, d0, p3, d3, chord: float) -> tuple[float, float]:
     chord at 90 deg, at most chord/2."""
     phi = math.acos(float(np.clip(np.dot(d0, d3), -1.0, 1.0)))
     ratio = 2.0 / 3.0 * math.tan(phi / 4) / math.sin(phi / 2) if phi > 1e-6 else 1.0 / 3.0
-    return chord * min(ratio, 0.5), chord * min(ratio, 0.5)
+    h = chord * min(ratio, 0.5)
+    return h, h
 
 
 def _corner_handles(p0, d0, p3, d3, chord: float) -> tuple[float, float]:

@@ -64,9 +64,6 @@ class TopologyEstimator:
         tracked, plain = self.cfg.for_tracks(), self.cfg.for_voxels()
         self._tables_all = Tables(tracked)
         self._tables_plain = self._tables_all if plain == tracked else Tables(plain)
-        self._pcfg_all = self.cfg.preprocess_config()
-        self._pcfg_radar = replace(self._pcfg_all,
-                                   min_part_length=self.cfg.radar_tracks_min_part_length)
         self.reset()
 
     # ------------------------------------------------------------------ public API
@@ -272,11 +269,8 @@ class TopologyEstimator:
 
     @property
     def _pcfg(self):
-        """The preprocessing parameters of this window: a window whose tracks all come from
-        the radar tracker keeps trajectory parts from ``radar_tracks_min_part_length`` (a
-        radar track starts some metres after its vehicle appears: on a road the net cuts
-        17 m out its parts beyond ``part_outside`` are 3-5 m long)."""
-        return self._pcfg_radar if self._radar_tracks else self._pcfg_all
+        """The preprocessing parameters of this window (:attr:`_window_cfg`)."""
+        return self._window_cfg.preprocess_config()
 
     @property
     def _tables(self) -> Tables:
@@ -350,17 +344,20 @@ class TopologyEstimator:
 
     @property
     def _window_cfg(self) -> TopologyConfig:
-        """The settings of this window's descent and reported estimate. A window whose
-        tracks all come from the radar tracker adds arms for unexplained parts from
-        ``radar_tracks_add_support`` passages (a radar track that breaks inside the box
-        leaves parts no arm explains) and leaves no arm out by
-        :func:`.support.drop_empty_arms` (its broken tracks drive real arms next to the box
-        too seldom to tell them from junk ones). Each setting is read by one of the two
-        steps only (``descent_add_support`` by the descent, ``empty_arm_drop`` by the
-        report)."""
+        """The settings of this window's preprocessing, descent and reported estimate. A
+        window whose tracks all come from the radar tracker keeps trajectory parts from
+        ``radar_tracks_min_part_length`` (a radar track starts some metres after its vehicle
+        appears: on a road the net cuts 17 m out its parts beyond ``part_outside`` are 3-5 m
+        long), adds arms for unexplained parts from ``radar_tracks_add_support`` passages (a
+        radar track that breaks inside the box leaves parts no arm explains) and leaves no
+        arm out by :func:`.support.drop_empty_arms` (its broken tracks drive real arms next
+        to the box too seldom to tell them from junk ones). Each setting is read by one step
+        only (``min_part_length`` by the preprocessing, ``descent_add_support`` by the
+        descent, ``empty_arm_drop`` by the report)."""
         if not self._radar_tracks:
             return self.cfg
-        return replace(self.cfg, descent_add_support=self.cfg.radar_tracks_add_support,
+        return replace(self.cfg, min_part_length=self.cfg.radar_tracks_min_part_length,
+                       descent_add_support=self.cfg.radar_tracks_add_support,
                        empty_arm_drop=False)
 
     def _track_convergence(self) -> None:
