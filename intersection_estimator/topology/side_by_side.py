@@ -10,7 +10,15 @@ the curve of the road; its median over the overlap is the separation of their la
 :func:`lanes_side_by_side` places the parts of an arm and direction on one lateral line
 (least squares over the separations of the overlapping pairs, per connected group) and
 counts the lanes that groups of positions a whole number of lane widths apart (within
-``TOL``) span. :func:`fit_counts` sets an arm's lane count from it (:func:`counted`) and
+``TOL``) span: over the whole profiles and over their first ``NEAR_M`` (36 m), where a turn
+pocket's vehicles drive beside the others before they join the main lane's course farther
+out; entering profiles also over their first ``POCKET_M`` (24 m). A pocket whose vehicles
+drive beside the others over its first 16-20 m only shows half its stretches within 36 m
+at a lane's separation and half at none, and the median of the two is no whole lane (SUMO
+dev seed 16: two vehicles 3.3 m beside the others from 14 to 32 m out, on their course
+beyond). Leaving profiles are not read so short: leaving lanes have no pockets, and near
+the box their parts still settle out of their turns (a Table I arm read a fifth lane
+there; docs/real_junctions.md, "Stop 57"). :func:`fit_counts` sets an arm's lane count from it (:func:`counted`) and
 refits its gap, width and axis offset for the new counts
 (:func:`.refit.refit_lane_candidates`):
 
@@ -104,6 +112,13 @@ ROAD_GAP = 2.5
 #: the lanes are counted over the whole profiles and over their first this many metres:
 #: a turn pocket's vehicles drive beside the others near the box only [m]
 NEAR_M = 36.0
+#: entering profiles are also counted over their first this many metres: where a pocket's
+#: vehicles share the main lane's course over the second half of ``NEAR_M``, the median
+#: separation there mixes both (module doc) [m]
+POCKET_M = 24.0
+#: the near stretches of the entering and the leaving profiles (leaving lanes have no
+#: pockets, and near the box their parts still settle out of their turns)
+NEARS = ((NEAR_M, POCKET_M), (NEAR_M,))
 
 
 class Tracks(NamedTuple):
@@ -372,18 +387,21 @@ def _lanes_spanned(p: np.ndarray, w: float) -> int:
     return best
 
 
-def lanes_side_by_side(T: np.ndarray, w: float, min_overlap: float) -> int:
+def lanes_side_by_side(T: np.ndarray, w: float, min_overlap: float,
+                       near: tuple = (NEAR_M,)) -> int:
     """Lanes that the profiles ``T`` (one arm and direction, :func:`arm_profiles`) show
-    side by side, over their whole length or their first ``NEAR_M`` metres: 0 when no two
-    parts overlap by ``min_overlap`` metres."""
-    return side_by_side(T, w, min_overlap)[0]
+    side by side, over their whole length or one of their first ``near`` stretches [m]
+    (entering: ``NEAR_M`` and ``POCKET_M``): 0 when no two parts overlap by
+    ``min_overlap`` metres."""
+    return side_by_side(T, w, min_overlap, near)[0]
 
 
-def side_by_side(T: np.ndarray, w: float, min_overlap: float) -> tuple[int, int]:
+def side_by_side(T: np.ndarray, w: float, min_overlap: float,
+                 near: tuple = (NEAR_M,)) -> tuple[int, int]:
     """(:func:`lanes_side_by_side`, the number of parts compared: in a group of the whole
     profiles)."""
     whole = _positions(T, min_overlap)
-    groups = whole + _positions(T[:, :int(NEAR_M / STEP)], min_overlap)
+    groups = whole + [p for m in near for p in _positions(T[:, :int(m / STEP)], min_overlap)]
     return (max((_lanes_spanned(p, w) for p in groups), default=0),
             int(sum(len(p) for p in whole)))
 
@@ -452,7 +470,7 @@ def fit_counts(post, S: np.ndarray, tr: Tracks | None, cfg) -> tuple[np.ndarray,
         ov = cfg.side_by_side_overlap
         want = []
         for side, (n, T) in enumerate(zip(now, profiles)):
-            shown, compared = side_by_side(T[:, :inside], w, ov)
+            shown, compared = side_by_side(T[:, :inside], w, ov, NEARS[side])
             beyond = lanes_beyond(T[:, inside:], w, ov)
             m = counted(n, shown, compared, cfg, beyond)
             if (cfg.side_by_side_occupied and m == n > max(shown, beyond, 1)

@@ -14,7 +14,7 @@ from intersection_estimator.observations import Detections
 from intersection_estimator.topology import TopologyConfig, TopologyEstimator
 from intersection_estimator.topology.config import Tables
 from intersection_estimator.topology.mcmc import Posterior
-from intersection_estimator.topology.side_by_side import (STEP, arm_profiles, counted,
+from intersection_estimator.topology.side_by_side import (NEARS, STEP, arm_profiles, counted,
                                                           entering_rows, fit_counts, lanes_beyond,
                                                           lanes_side_by_side, nearest_arm, occupied,
                                                           side_by_side, tracks_of)
@@ -60,6 +60,22 @@ def test_a_turn_pocket_counts_near_the_box():
     assert lanes_side_by_side(T, W, 8.0) == 2
     T[3, near] -= W
     assert lanes_side_by_side(T, W, 8.0) == 1
+
+
+def test_a_short_turn_pocket_counts_in_the_shorter_near_window():
+    """Two vehicles drive the pocket beside the others over the first 16 m and the main
+    lane's course beyond (SUMO dev seed 16): over the first 36 m the median separation mixes
+    both stretches, over the first 24 m it is the pocket's. Entering profiles are read over
+    both stretches, leaving ones (no pockets) over the 36 m only."""
+    rng = np.random.default_rng(4)
+    T = _profiles([0.0, 0.1, -0.1, 0.0, 0.05], rng)
+    pocket = np.arange(T.shape[1]) * STEP < 16.0
+    T[3:, pocket] += W
+    entering, leaving = NEARS
+    assert lanes_side_by_side(T, W, 8.0, entering) == 2
+    assert lanes_side_by_side(T, W, 8.0, leaving) == 1
+    T[3:, pocket] -= W
+    assert lanes_side_by_side(T, W, 8.0, entering) == 1
 
 
 def test_the_parts_compared_are_counted():
