@@ -18,9 +18,10 @@ at a lane's separation and half at none, and the median of the two is no whole l
 dev seed 16: two vehicles 3.3 m beside the others from 14 to 32 m out, on their course
 beyond). Leaving profiles are not read so short: leaving lanes have no pockets, and near
 the box their parts still settle out of their turns (a Table I arm read a fifth lane
-there; docs/real_junctions.md, "Stop 57"). :func:`fit_counts` sets an arm's lane count from it (:func:`counted`) and
-refits its gap, width and axis offset for the new counts
-(:func:`.refit.refit_lane_candidates`):
+there; docs/real_junctions.md, "Stop 57").
+
+:func:`fit_counts` sets an arm's lane count from it (:func:`counted`) and refits its gap,
+width and axis offset for the new counts (:func:`.refit.refit_lane_candidates`):
 
 * a lower bound, kept where the part means alone would pay for fewer lanes;
 * an upper bound of one lane more than shown, once ``side_by_side_cap`` (2) parts were
