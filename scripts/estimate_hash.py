@@ -17,9 +17,9 @@ key of estimate.json that is 0 by default) proves the estimates unchanged with
 ``--drop-key``: the field is removed wherever it occurs before hashing.
 
 The hash is one machine's: the same commit in the same pinned environment hashes
-differently on another machine (most likely the compiled kernels, built by numba for the
-host CPU, and BLAS round differently on another processor) (stop 57:
-``4a519dbb...`` on the earlier machine, ``13be3aa6...`` on an AMD EPYC one). Record the
+differently on another machine (stop 57: ``4a519dbb...`` on the earlier machine,
+``13be3aa6...`` on an AMD EPYC one), most likely because the compiled kernels (built by
+numba for the host CPU) and BLAS round differently on another processor. Record the
 before-hash on the machine that checks the after-hash.
 """
 

@@ -67,8 +67,8 @@ def drop_empty_arms(post: Posterior, S: np.ndarray, sup: np.ndarray, cfg, tracks
     ``min_part_points`` rows within ``empty_arm_reach`` lane widths beside the arm's lanes:
     farther out a track drives another road beside it, docs/real_junctions.md "Stop 56").
     Such an arm is the MAP's many-lane side that reached onto a curved neighbouring
-    approach's traffic; once :mod:`.side_by_side` set its counts, nothing is left on it. Weakest first, down to ``min_arms``; the same ``S`` when none is
-    left out."""
+    approach's traffic; once :mod:`.side_by_side` set its counts, nothing is left on it.
+    Weakest first, down to ``min_arms``; the same ``S`` when none is left out."""
     bar = cfg.weak_arm_support
     return _leave_out(post, S, sup, cfg, lambda S, sup, k: sup[k] < bar and near_tracks(
         S, k, tracks, cfg.part_outside, cfg.weak_arm_box, cfg.min_part_points,
